@@ -1,0 +1,37 @@
+# The few verbs a newcomer needs. Everything sets itself up on first use.
+PYTHON ?= python3.11
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+BENCH ?= full
+
+.PHONY: run test bench lint format clean
+
+$(STAMP): pyproject.toml requirements.lock
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r requirements.lock
+	touch $(STAMP)
+
+## run: set up everything and start the whole system (web, worker, simulated fleet, Redis) on http://127.0.0.1:8000
+run: $(STAMP)
+	$(PY) -m fleet.run
+
+## test: set up everything and run the whole test suite (browser tests where chromium exists)
+test: $(STAMP)
+	$(PY) -m fleet.testrun
+
+## bench: the paper's experiments and the scale benchmarks; results under bench/results/ (BENCH=quick: under 5 min)
+bench: $(STAMP)
+	$(PY) -m bench.run --$(BENCH)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: $(STAMP)
+	$(VENV)/bin/ruff format .
+	$(VENV)/bin/ruff check --fix .
+
+clean:
+	rm -rf var/*.sqlite3 var/*.sock var/static

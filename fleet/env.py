@@ -1,0 +1,125 @@
+"""Typed settings from the environment.
+
+Every helper raises ImproperlyConfigured naming the variable, so a bad value stops start-up with one line that
+says what to fix. No Django import beyond the exception: settings.py calls these before Django is set up.
+"""
+
+import os
+import secrets
+from pathlib import Path
+from urllib.parse import urlparse
+
+from django.core.exceptions import ImproperlyConfigured
+
+TRUE_WORDS = {"1", "true", "yes", "on"}
+FALSE_WORDS = {"0", "false", "no", "off", ""}
+
+
+def env_bool(name: str, default: bool = False) -> bool:
+    """Read a yes/no variable; anything else is an error."""
+    raw = os.environ.get(name)
+    if raw is None:
+        return default
+    word = raw.strip().lower()
+    if word in TRUE_WORDS:
+        return True
+    if word in FALSE_WORDS:
+        return False
+    raise ImproperlyConfigured(f"{name}: expected one of 1/0, true/false, yes/no, on/off, got {raw!r}")
+
+
+def env_list(name: str, default: list[str]) -> list[str]:
+    """Read a comma-separated list; empty items are an error."""
+    raw = os.environ.get(name)
+    if raw is None:
+        return default
+    items = [item.strip() for item in raw.split(",")]
+    if not all(items):
+        raise ImproperlyConfigured(
+            f"{name}: expected a comma-separated list without empty items, got {raw!r}"
+        )
+    return items
+
+
+def env_database(name: str, default_sqlite: Path) -> dict:
+    """Turn DATABASE_URL into Django's DATABASES['default'] (SQLite file when unset)."""
+    import dj_database_url
+
+    raw = os.environ.get(name)
+    if not raw:
+        return {
+            "ENGINE": "django.db.backends.sqlite3",
+            "NAME": str(default_sqlite),
+            "OPTIONS": {"timeout": 20},
+        }
+    scheme = urlparse(raw).scheme
+    if scheme not in {"sqlite", "postgres", "postgresql", "pgsql", "postgis"}:
+        raise ImproperlyConfigured(
+            f"{name}: unsupported scheme {scheme!r}; use postgres://… or sqlite:///path"
+        )
+    try:
+        config = dj_database_url.parse(raw, conn_max_age=60, conn_health_checks=True)
+    except Exception as exc:  # dj_database_url raises several types for malformed URLs
+        raise ImproperlyConfigured(f"{name}: cannot parse {raw!r}: {exc}") from None
+    if not config.get("NAME"):
+        raise ImproperlyConfigured(f"{name}: no database name in {raw!r}")
+    return config
+
+
+def env_redis_url(name: str, default_socket: Path) -> str:
+    """Read REDIS_URL: redis://, rediss:// or unix:// (the embedded Redis is a unix socket under var/)."""
+    raw = os.environ.get(name) or f"unix://{default_socket}"
+    parsed = urlparse(raw)
+    if parsed.scheme not in {"redis", "rediss", "unix"}:
+        raise ImproperlyConfigured(
+            f"{name}: expected redis://host:port/db, rediss://… or unix:///path, got {raw!r}"
+        )
+    if parsed.scheme == "unix" and not parsed.path:
+        raise ImproperlyConfigured(f"{name}: unix:// URL without a socket path: {raw!r}")
+    if parsed.scheme != "unix":
+        try:
+            parsed.port  # noqa: B018 - raises ValueError on a bad port
+        except ValueError:
+            raise ImproperlyConfigured(f"{name}: bad port in {raw!r}") from None
+        if not parsed.hostname:
+            raise ImproperlyConfigured(f"{name}: no host in {raw!r}")
+    return raw
+
+
+def celery_broker_url(redis_url: str) -> str:
+    """Celery spells a unix-socket Redis as redis+socket://."""
+    parsed = urlparse(redis_url)
+    if parsed.scheme == "unix":
+        return f"redis+socket://{parsed.path}"
+    return redis_url
+
+
+def channels_host(redis_url: str) -> str:
+    """channels-redis takes redis:// and unix:// URLs as they are."""
+    return redis_url
+
+
+def env_secret_key(name: str, key_file: Path) -> str:
+    """Read SECRET_KEY, else the one generated once into var/ (never committed)."""
+    raw = os.environ.get(name)
+    if raw is not None:
+        if len(raw) < 32:
+            raise ImproperlyConfigured(f"{name}: must be at least 32 characters long")
+        return raw
+    if key_file.exists():
+        return key_file.read_text().strip()
+    key_file.parent.mkdir(parents=True, exist_ok=True)
+    key = secrets.token_urlsafe(50)
+    key_file.write_text(key)
+    key_file.chmod(0o600)
+    return key
+
+
+def env_str(name: str, default: str | None = None, min_length: int = 0) -> str | None:
+    """Read a string variable that, when set, must be at least min_length long."""
+    raw = os.environ.get(name)
+    if raw is None or raw == "":
+        return default
+    if len(raw) < min_length:
+        raise ImproperlyConfigured(f"{name}: must be at least {min_length} characters long")
+    return raw

@@ -1,0 +1,3 @@
+"""WebSocket routes: one socket per page."""
+
+websocket_urlpatterns = []

@@ -1,0 +1,57 @@
+"""`make run`: migrate, set up the demo, then start every process of the system under one honcho manager.
+
+One Ctrl-C stops them all; nothing is left running or listening.
+"""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from honcho.manager import Manager
+
+from fleet import embedded_redis
+
+BASE_DIR = Path(__file__).resolve().parent.parent
+HOST, PORT = "127.0.0.1", int(os.environ.get("FLEET_PORT", "8000"))
+
+
+def processes(python: str) -> dict[str, str]:
+    """The system's processes, each a shell command (honcho runs them and merges their output)."""
+    manage = f"{python} manage.py"
+    procs = {
+        "web": f"{python} -m uvicorn fleet.asgi:application --host {HOST} --port {PORT} --log-level warning",
+        "worker": f"{python} -m celery -A fleet worker -Q instructions,control,registration -c 2 -l warning",
+        "sim": f"{manage} simworker --world paper",
+        "links": f"{manage} robotlinks --register-world paper",
+    }
+    return procs
+
+
+def main() -> int:
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    if os.environ.get("REDIS_URL"):
+        return start_all(env)
+    socket_path = BASE_DIR / "var" / "redis.sock"
+    redis = embedded_redis.start(socket_path)
+    print(f"embedded Redis at unix://{socket_path}", flush=True)
+    try:
+        return start_all({**env, "REDIS_URL": f"unix://{socket_path}"})
+    finally:
+        embedded_redis.stop(redis, socket_path)
+
+
+def start_all(env: dict) -> int:
+    python = sys.executable
+    for step in (["migrate", "--noinput", "-v", "0"], ["setup_demo"]):
+        subprocess.run([python, "manage.py", *step], cwd=BASE_DIR, env=env, check=True)
+    manager = Manager()
+    for name, command in processes(python).items():
+        manager.add_process(name, command, cwd=str(BASE_DIR), env=env)
+    print(f"\n  Fleet portal: http://{HOST}:{PORT}/  (Ctrl-C stops everything)\n", flush=True)
+    manager.loop()
+    return manager.returncode or 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

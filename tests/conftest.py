@@ -1,0 +1,57 @@
+"""Fixtures shared by every app's tests."""
+
+import pytest
+from django.contrib.auth.models import Group, User
+
+from fleet.roles import ADMIN, OPERATOR, VIEWER, sync_groups
+
+PASSWORD = "correct-horse-battery"
+
+
+@pytest.fixture
+def roles(db):
+    """The viewer, operator and admin groups with their permissions."""
+    sync_groups()
+    return {name: Group.objects.get(name=name) for name in (VIEWER, OPERATOR, ADMIN)}
+
+
+def _user(roles, name: str, role: str | None, **extra) -> User:
+    user = User.objects.create_user(name, password=PASSWORD, **extra)
+    if role:
+        user.groups.add(roles[role])
+    return user
+
+
+@pytest.fixture
+def viewer(roles):
+    """A user who may only look."""
+    return _user(roles, "vera", VIEWER)
+
+
+@pytest.fixture
+def operator(roles):
+    """A user who may instruct and control robots."""
+    return _user(roles, "otto", OPERATOR)
+
+
+@pytest.fixture
+def second_operator(roles):
+    """Another operator, to contend for control of a robot."""
+    return _user(roles, "olga", OPERATOR)
+
+
+@pytest.fixture
+def fleet_admin(roles):
+    """A user in the admin group (also Django staff, so the admin site opens)."""
+    return _user(roles, "ada", ADMIN, is_staff=True, is_superuser=True)
+
+
+@pytest.fixture
+def client_for(client):
+    """Log the test client in as the given user and return it."""
+
+    def _login(user):
+        client.force_login(user)
+        return client
+
+    return _login
