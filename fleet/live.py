@@ -1,0 +1,101 @@
+"""Every push to browsers goes through here: typed payloads sent to Channels groups after the commit.
+
+Groups: "fleet" (every dashboard) and "robot.<pk>" (a robot's page). Consumers only authenticate, join groups
+and forward; the handler name in the consumer matches the payload's "type".
+"""
+
+from typing import TypedDict
+
+from asgiref.sync import async_to_sync
+from channels.layers import get_channel_layer
+from django.db import transaction
+
+FLEET_GROUP = "fleet"
+
+
+def robot_group(robot_id: int) -> str:
+    return f"robot.{robot_id}"
+
+
+class RobotStatus(TypedDict, total=False):
+    type: str  # "robot.status"
+    robot: str
+    id: int
+    link_status: str
+    state: str
+    last_seen: str | None
+
+
+class StateChange(TypedDict):
+    type: str  # "robot.transition"
+    robot: str
+    id: int
+    from_state: str
+    to_state: str
+    at: str
+    reason: str
+    instruction: int | None
+
+
+class InstructionUpdate(TypedDict, total=False):
+    type: str  # "instruction.update"
+    id: int
+    text: str
+    status: str
+    outcome: str
+
+
+def send(group: str, payload: dict) -> None:
+    """Send now (from sync code outside a transaction, or from a worker loop)."""
+    layer = get_channel_layer()
+    if layer is not None:
+        async_to_sync(layer.group_send)(group, payload)
+
+
+def send_on_commit(group: str, payload: dict) -> None:
+    """Send once the current transaction commits, so browsers never see state the database lacks."""
+    transaction.on_commit(lambda: send(group, payload))
+
+
+def robot_status(robot) -> None:
+    """A robot's link status or state changed."""
+    payload = RobotStatus(
+        type="robot.status",
+        robot=robot.name,
+        id=robot.pk,
+        link_status=robot.link_status,
+        state=robot.state,
+        last_seen=robot.last_seen.isoformat() if robot.last_seen else None,
+    )
+    send_on_commit(FLEET_GROUP, payload)
+    send_on_commit(robot_group(robot.pk), payload)
+
+
+def transition(robot, record) -> None:
+    """A stored StateTransition, pushed to the fleet and the robot's page."""
+    payload = StateChange(
+        type="robot.transition",
+        robot=robot.name,
+        id=robot.pk,
+        from_state=record.from_state,
+        to_state=record.to_state,
+        at=record.at.isoformat(),
+        reason=record.reason,
+        instruction=record.instruction_id,
+    )
+    send_on_commit(FLEET_GROUP, payload)
+    send_on_commit(robot_group(robot.pk), payload)
+
+
+def instruction(instruction) -> None:
+    """An instruction's status or outcome changed."""
+    send_on_commit(
+        FLEET_GROUP,
+        InstructionUpdate(
+            type="instruction.update",
+            id=instruction.pk,
+            text=instruction.text,
+            status=instruction.status,
+            outcome=instruction.outcome,
+        ),
+    )
