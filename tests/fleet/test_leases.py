@@ -1,0 +1,54 @@
+"""Control leases: one holder at a time, expiry, admin takeover, viewers never command."""
+
+from datetime import timedelta
+
+import pytest
+from django.utils import timezone
+
+from fleet import leases
+from fleet.models import AuditEntry, ControlLease
+from robots.models import Robot
+
+
+@pytest.fixture
+def husky(db):
+    return Robot.objects.create(name="husky", endpoint="ws://127.0.0.1:9092")
+
+
+def test_second_operator_is_refused_while_first_holds(husky, operator, second_operator):
+    leases.take(operator, husky)
+    leases.check_command(operator, husky)
+    with pytest.raises(leases.ControlRefused, match="held by otto"):
+        leases.check_command(second_operator, husky)
+    with pytest.raises(leases.ControlRefused, match="held by otto"):
+        leases.take(second_operator, husky)
+
+
+def test_expired_lease_frees_the_robot(husky, operator, second_operator):
+    leases.take(operator, husky)
+    ControlLease.objects.update(expires_at=timezone.now() - timedelta(seconds=1))
+    leases.check_command(second_operator, husky)
+    assert leases.take(second_operator, husky).user == second_operator
+
+
+def test_admin_takes_over_and_it_is_audited(husky, operator, fleet_admin):
+    leases.take(operator, husky)
+    leases.take(fleet_admin, husky)
+    assert leases.holder(husky) == fleet_admin
+    entry = AuditEntry.objects.filter(action="control.take", user=fleet_admin).get()
+    assert entry.details["taken_over_from"] == "otto"
+
+
+def test_viewer_never_commands(husky, viewer):
+    with pytest.raises(leases.ControlRefused, match="only view"):
+        leases.check_command(viewer, husky)
+    with pytest.raises(leases.ControlRefused):
+        leases.take(viewer, husky)
+
+
+def test_only_holder_or_admin_releases(husky, operator, second_operator, fleet_admin):
+    leases.take(operator, husky)
+    with pytest.raises(leases.ControlRefused):
+        leases.release(second_operator, husky)
+    assert leases.release(fleet_admin, husky) is True
+    assert leases.holder(husky) is None
