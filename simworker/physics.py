@@ -1,0 +1,192 @@
+"""Headless 2D physics for the simulated fleet (pymunk), stepped at a fixed dt.
+
+Robots are dynamic boxes driven through `velocity_func`: Chipmunk calls it after collision detection, so
+the solver still corrects the commanded velocity and a robot stops at a wall instead of passing through
+(see stack-notes, "pymunk trap"). Per robot per step the only Python work is that one callback, and
+resting robots fall asleep so they cost nothing until the next command.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+
+import pymunk
+
+from fleet.mapfile import OCCUPIED, OccupancyGrid
+from simworker.models_catalog import Laser, ModelProfile
+
+DEFAULT_DT = 1.0 / 50.0
+WALL_CATEGORY = 0b01
+ROBOT_CATEGORY = 0b10
+
+
+def _clamp(value: float, low: float, high: float) -> float:
+    return low if value < low else high if value > high else value
+
+
+@dataclass
+class Command:
+    """A velocity command in the body frame, with the sim time it arrived."""
+
+    vx: float = 0.0
+    vy: float = 0.0
+    wz: float = 0.0
+    stamp: float = -1e9
+
+
+class RobotBody:
+    """One robot's body: footprint, limits, the last command and the velocity actually applied."""
+
+    def __init__(self, physics: Physics, name: str, profile: ModelProfile, group: int) -> None:
+        self.physics = physics
+        self.name = name
+        self.profile = profile
+        self.cmd = Command()
+        self.vx = self.vy = self.wz = 0.0  # applied, within the acceleration limits
+        self.body = pymunk.Body(
+            profile.mass, pymunk.moment_for_box(profile.mass, (profile.length, profile.width))
+        )
+        half_l, half_w, off = profile.length / 2, profile.width / 2, profile.offset_x
+        box = [
+            (off - half_l, -half_w),
+            (off + half_l, -half_w),
+            (off + half_l, half_w),
+            (off - half_l, half_w),
+        ]
+        self.shape = pymunk.Poly(self.body, box, radius=0.005)
+        self.shape.friction = 0.2
+        self.shape.filter = pymunk.ShapeFilter(group=group, categories=ROBOT_CATEGORY)
+        self.body.velocity_func = self._drive
+
+    def command(self, vx: float, wz: float, vy: float = 0.0) -> None:
+        """Take a new velocity command (clamped to the controller's limits) and wake the body."""
+        p = self.profile
+        self.cmd = Command(
+            _clamp(vx, p.min_v, p.max_v),
+            _clamp(vy, -p.max_vy, p.max_vy),
+            _clamp(wz, -p.max_w, p.max_w),
+            self.physics.time,
+        )
+        self.body.activate()
+
+    def _drive(self, body: pymunk.Body, gravity, damping: float, dt: float) -> None:
+        """Ramp toward the command within the acceleration limits and set the body's velocity."""
+        p, cmd = self.profile, self.cmd
+        if self.physics.time - cmd.stamp > p.cmd_timeout:  # diff_drive_controller's cmd_vel_timeout
+            tx = ty = tw = 0.0
+        else:
+            tx, ty, tw = cmd.vx, cmd.vy, cmd.wz
+        dv, dw = p.acc_v * dt, p.acc_w * dt
+        self.vx += _clamp(tx - self.vx, -dv, dv)
+        self.vy += _clamp(ty - self.vy, -dv, dv)
+        self.wz += _clamp(tw - self.wz, -dw, dw)
+        c, s = math.cos(body.angle), math.sin(body.angle)
+        body.velocity = (self.vx * c - self.vy * s, self.vx * s + self.vy * c)
+        body.angular_velocity = self.wz
+
+    def pose(self) -> tuple[float, float, float]:
+        """Return the ground-truth pose (x, y, yaw) of base_footprint in the map frame."""
+        x, y = self.body.position
+        yaw = math.atan2(math.sin(self.body.angle), math.cos(self.body.angle))
+        return x, y, yaw
+
+    def twist(self) -> tuple[float, float, float]:
+        """Return the measured body-frame velocity (vx, vy, wz)."""
+        vx, vy = self.body.velocity
+        c, s = math.cos(self.body.angle), math.sin(self.body.angle)
+        return vx * c + vy * s, -vx * s + vy * c, self.body.angular_velocity
+
+
+class Physics:
+    """The world's space: static walls from the occupancy grid plus one body per robot."""
+
+    def __init__(self, grid: OccupancyGrid, dt: float = DEFAULT_DT, seed: int = 0) -> None:
+        if grid.origin[2]:
+            raise ValueError("physics needs a map with origin yaw 0")
+        self.dt = dt
+        self.time = 0.0
+        self.steps = 0
+        self.rng = random.Random(seed)
+        self.space = pymunk.Space()
+        self.space.iterations = 6
+        self.space.sleep_time_threshold = 0.5
+        self.robots: dict[str, RobotBody] = {}
+        self.wall_boxes = wall_boxes(grid)
+        for x0, y0, x1, y1 in self.wall_boxes:
+            shape = pymunk.Poly.create_box_bb(self.space.static_body, pymunk.BB(x0, y0, x1, y1))
+            shape.friction = 0.2
+            shape.filter = pymunk.ShapeFilter(categories=WALL_CATEGORY)
+            self.space.add(shape)
+
+    def add_robot(self, name: str, profile: ModelProfile, x: float, y: float, yaw: float) -> RobotBody:
+        """Place a robot body at (x, y, yaw) and return it."""
+        if name in self.robots:
+            raise ValueError(f"robot {name!r} already in the world")
+        robot = RobotBody(self, name, profile, group=len(self.robots) + 1)
+        robot.body.position = (x, y)
+        robot.body.angle = yaw
+        self.space.add(robot.body, robot.shape)
+        self.robots[name] = robot
+        return robot
+
+    def step(self) -> None:
+        """Advance the world by one fixed dt."""
+        self.space.step(self.dt)
+        self.time += self.dt
+        self.steps += 1
+
+    def scan(self, robot: RobotBody, laser: Laser, noise: float = 0.0) -> list[float | None]:
+        """Cast the laser's rays from the robot; None where nothing is in range (null on the wire)."""
+        x, y, yaw = robot.pose()
+        flt = pymunk.ShapeFilter(group=robot.shape.filter.group)
+        n = laser.samples
+        inc = (laser.angle_max - laser.angle_min) / max(n - 1, 1)
+        rmax, rmin = laser.range_max, laser.range_min
+        query = self.space.segment_query_first
+        ranges: list[float | None] = []
+        for i in range(n):
+            a = yaw + laser.angle_min + i * inc
+            hit = query((x, y), (x + rmax * math.cos(a), y + rmax * math.sin(a)), 0.0, flt)
+            if hit is None:
+                ranges.append(None)
+                continue
+            r = hit.alpha * rmax + (self.rng.gauss(0.0, noise) if noise else 0.0)
+            ranges.append(round(r, 4) if rmin <= r <= rmax else None)
+        return ranges
+
+
+def wall_boxes(grid: OccupancyGrid) -> list[tuple[float, float, float, float]]:
+    """Merge occupied cells into axis-aligned boxes (row runs, then equal runs stacked upward)."""
+    res, (ox, oy, _) = grid.resolution, grid.origin
+    open_runs: dict[tuple[int, int], int] = {}  # (col0, col1) -> first row
+    boxes = []
+
+    def close(run: tuple[int, int], row0: int, row1: int) -> None:
+        boxes.append((ox + run[0] * res, oy + row0 * res, ox + run[1] * res, oy + row1 * res))
+
+    for row in range(grid.height + 1):
+        runs = set(_runs(grid, row)) if row < grid.height else set()
+        for run in [r for r in open_runs if r not in runs]:
+            close(run, open_runs.pop(run), row)
+        for run in runs:
+            open_runs.setdefault(run, row)
+    return boxes
+
+
+def _runs(grid: OccupancyGrid, row: int) -> list[tuple[int, int]]:
+    """Return [col0, col1) runs of occupied cells in a row."""
+    data, w = grid.data, grid.width
+    base = row * w
+    runs, start = [], None
+    for col in range(w):
+        occ = data[base + col] == OCCUPIED
+        if occ and start is None:
+            start = col
+        elif not occ and start is not None:
+            runs.append((start, col))
+            start = None
+    if start is not None:
+        runs.append((start, w))
+    return runs

@@ -1,0 +1,170 @@
+"""One simulated robot on its endpoint: graph entries, twist_mux, odometry and laser publishing."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+
+from simworker.graph import Graph
+from simworker.interfaces import build_interface
+from simworker.models_catalog import ModelProfile
+from simworker.physics import Physics, RobotBody
+from simworker.server import RosbridgeServer
+from simworker.world import RobotSpec
+
+MUX_TIMEOUT = 0.5  # twist_mux input timeout (s)
+ZEROS36 = "[" + ",".join(["0.0"] * 36) + "]"
+
+
+def number(value) -> float:
+    """Return a JSON number as float; reject strings, bools, NaN and infinities like a typed ROS field."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise TypeError(f"expected a finite number, got {value!r}")
+    return float(value)
+
+
+def vector(msg: dict, key: str) -> tuple[float, float, float]:
+    """Return (x, y, z) of a Vector3 field; missing fields default to 0 as rosbridge fills them."""
+    vec = msg.get(key, {})
+    if not isinstance(vec, dict):
+        raise TypeError(f"{key} must be an object")
+    return number(vec.get("x", 0.0)), number(vec.get("y", 0.0)), number(vec.get("z", 0.0))
+
+
+def yaw_of(orientation: dict) -> float:
+    """Return the yaw of a geometry_msgs/Quaternion dict (identity when all zero)."""
+    qx, qy, qz, qw = (number(orientation.get(k, 0.0)) for k in ("x", "y", "z", "w"))
+    if qx == qy == qz == qw == 0.0:
+        return 0.0
+    return math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+
+
+class SimRobot:
+    """Glue between a physics body and the rosbridge endpoint that shows the robot."""
+
+    def __init__(
+        self,
+        spec: RobotSpec,
+        profile: ModelProfile,
+        body: RobotBody,
+        physics: Physics,
+        server: RosbridgeServer,
+        clock: Callable[[], float],
+        odom_noise: float = 0.0,
+    ) -> None:
+        self.spec, self.profile, self.body, self.physics, self.server = spec, profile, body, physics, server
+        self.graph: Graph = server.graph
+        self.clock = clock
+        self.ns = spec.namespace.rstrip("/")
+        self.iface = build_interface(profile, self.ns, self.graph.ros_version, spec.stack, spec.name)
+        self.start = (spec.x, spec.y, spec.yaw)
+        self.odom_noise = odom_noise
+        self.drift = [0.0, 0.0, 0.0]
+        self.seq = 0
+        self.mux_priority, self.mux_time = -1, -1e9
+        self.navigator = None
+        self._register()
+        self._odom_templates = [
+            (t, self._odom_template(frame, child)) for t, frame, child in self.iface.odom_topics
+        ]
+
+    def _register(self) -> None:
+        g = self.graph
+        for node, entry in self.iface.nodes.items():
+            for topic, type_ in entry["pubs"].items():
+                g.add_publisher(node, topic, type_)
+            for topic, type_ in entry["subs"].items():
+                g.add_subscriber(node, topic, type_)
+            for name, type_ in entry["services"].items():
+                g.add_service(node, name, type_)
+        g.params.update(self.iface.params)
+        g.latched_topics |= self.iface.latched
+        for topic, priority in self.iface.cmd_inputs.items():
+            g.on_topic(topic, lambda msg, p=priority: self.on_twist(msg, p))
+
+    # ----- commands -----
+    def on_twist(self, msg: dict, priority: int) -> None:
+        """Apply a Twist from a twist_mux input unless a higher-priority input is still fresh."""
+        lin, ang = vector(msg, "linear"), vector(msg, "angular")
+        now = self.physics.time
+        if priority < self.mux_priority and now - self.mux_time < MUX_TIMEOUT:
+            return
+        self.mux_priority, self.mux_time = priority, now
+        self.body.command(lin[0], ang[2], lin[1])
+
+    def drive(self, vx: float, wz: float) -> None:
+        """Command the base as the navigation stack does: through its cmd_vel topic and the mux."""
+        topic = self.iface.nav_cmd_topic
+        msg = {"linear": {"x": vx, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}}
+        self.on_twist(msg, self.iface.cmd_inputs.get(topic, 1000))
+        if self.server.subscribed(topic):
+            self.server.publish(topic, msg)
+
+    # ----- state -----
+    def pose(self) -> tuple[float, float, float]:
+        return self.body.pose()
+
+    def odom_pose(self) -> tuple[float, float, float]:
+        """Return the pose in the odom frame (start pose at the origin), plus accumulated drift."""
+        x, y, yaw = self.body.pose()
+        x0, y0, yaw0 = self.start
+        c, s = math.cos(-yaw0), math.sin(-yaw0)
+        dx, dy = x - x0, y - y0
+        return c * dx - s * dy + self.drift[0], s * dx + c * dy + self.drift[1], yaw - yaw0 + self.drift[2]
+
+    # ----- publishing -----
+    def _odom_template(self, frame: str, child: str) -> str:
+        if self.graph.ros_version == 1:
+            head = f'{{"header":{{"seq":%d,"stamp":{{"secs":%d,"nsecs":%d}},"frame_id":"{frame}"}}'
+        else:
+            head = f'{{"header":{{"stamp":{{"sec":%d,"nanosec":%d}},"frame_id":"{frame}"}}'
+        return (
+            head + f',"child_frame_id":"{child}","pose":{{"pose":{{"position":{{"x":%.5f,"y":%.5f,"z":0.0}},'
+            '"orientation":{"x":0.0,"y":0.0,"z":%.6f,"w":%.6f}},"covariance":' + ZEROS36 + "},"
+            '"twist":{"twist":{"linear":{"x":%.4f,"y":%.4f,"z":0.0},"angular":{"x":0.0,"y":0.0,"z":%.4f}},'
+            '"covariance":' + ZEROS36 + "}}"
+        )
+
+    def publish_odometry(self, t: float) -> None:
+        """Publish nav_msgs/Odometry on every odom topic someone subscribes to."""
+        server = self.server
+        wanted = [(topic, tpl) for topic, tpl in self._odom_templates if topic in server.subscribers]
+        if not wanted:
+            return
+        x, y, yaw = self.odom_pose()
+        if self.odom_noise and self.body.vx:
+            rng, k = self.physics.rng, self.odom_noise * abs(self.body.vx) * 0.05
+            self.drift[0] += rng.gauss(0, k)
+            self.drift[1] += rng.gauss(0, k)
+            self.drift[2] += rng.gauss(0, k)
+        vx, vy, wz = self.body.twist()
+        sec = int(t)
+        stamp = (sec, int((t - sec) * 1e9))
+        if self.graph.ros_version == 1:
+            self.seq += 1
+            stamp = (self.seq, *stamp)
+        values = (*stamp, x, y, math.sin(yaw / 2), math.cos(yaw / 2), vx, vy, wz)
+        for topic, tpl in wanted:
+            server.publish_text(topic, tpl % values)
+
+    def publish_scan(self, t: float) -> None:
+        """Publish sensor_msgs/LaserScan if someone subscribes (ray casting is the costly part)."""
+        laser, topic = self.profile.laser, self.iface.scan_topic
+        if laser is None or topic is None or topic not in self.server.subscribers:
+            return
+        ranges = self.physics.scan(self.body, laser, noise=0.01 if self.odom_noise else 0.0)
+        n = laser.samples
+        msg = {
+            "header": self.graph.header(laser.frame_id, t),
+            "angle_min": laser.angle_min,
+            "angle_max": laser.angle_max,
+            "angle_increment": (laser.angle_max - laser.angle_min) / max(n - 1, 1),
+            "time_increment": 0.0,
+            "scan_time": 1.0 / laser.rate_hz,
+            "range_min": laser.range_min,
+            "range_max": laser.range_max,
+            "ranges": ranges,
+            "intensities": [],
+        }
+        self.server.publish_text(topic, json.dumps(msg, separators=(",", ":")))
