@@ -136,6 +136,9 @@ LOGGING = {
 
 # The fleet's own knobs.
 FLEET_WORLD = os.environ.get("FLEET_WORLD", "paper")
+# The demo world's Table 12 slots are loaded disabled unless this is set, so that a person's instruction is not
+# refused because `make run` happened to start inside a slot; enable them in the admin or with this variable.
+FLEET_DEMO_SCHEDULES = env_bool("FLEET_DEMO_SCHEDULES", default=False)
 FLEET_ADMIN_PASSWORD = env_str("FLEET_ADMIN_PASSWORD", min_length=8)
 FLEET_CONTROL_LEASE_SECONDS = 300
 FLEET_IDLE_TIMEOUT_SECONDS = 600

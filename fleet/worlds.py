@@ -2,6 +2,7 @@
 
 import datetime
 
+from django.conf import settings
 from django.db import transaction
 
 from fleet.models import Location, Map, TimeSlot
@@ -55,7 +56,11 @@ def load_schedules(world, map_row: Map) -> int:
             robot=robot,
             start=datetime.time.fromisoformat(spec.start),
             end=datetime.time.fromisoformat(spec.end),
-            defaults={"goal": Location.objects.get(map=map_row, name=spec.goal), "task": spec.task},
+            defaults={
+                "goal": Location.objects.get(map=map_row, name=spec.goal),
+                "task": spec.task,
+                "enabled": settings.FLEET_DEMO_SCHEDULES,
+            },
         )
         created += was_created
     return created
