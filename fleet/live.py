@@ -99,3 +99,107 @@ def instruction(instruction) -> None:
             outcome=instruction.outcome,
         ),
     )
+
+
+# Poses travel on their own group: high-rate telemetry, one batched message per tick for the whole fleet.
+POSES_GROUP = "fleet.poses"
+POSE_CACHE_KEY = "fleet:pose:{id}"
+
+
+class RobotPose(TypedDict):
+    id: int
+    x: float
+    y: float
+    yaw: float
+    v: float  # linear speed, m/s
+    w: float  # angular speed, rad/s
+    t: float  # unix time of the odometry message
+
+
+class PoseBatch(TypedDict):
+    type: str  # "fleet.poses"
+    poses: list[RobotPose]
+
+
+class LeaseUpdate(TypedDict):
+    type: str  # "lease.update"
+    id: int
+    robot: str
+    holder: str | None
+    expires_at: str | None
+
+
+class GoalUpdate(TypedDict):
+    type: str  # "robot.goal"
+    id: int
+    robot: str
+    name: str | None
+    x: float | None
+    y: float | None
+
+
+class RegistrationProgress(TypedDict, total=False):
+    type: str  # "registration.progress"
+    endpoint: str
+    stage: str  # e.g. connecting, discovering, identifying, done, failed
+    message: str
+    robots: list[str]
+    ok: bool | None
+
+
+def lease(robot) -> None:
+    """A robot's control lease was taken, renewed, released or taken over."""
+    from fleet.models import ControlLease
+
+    current = ControlLease.objects.filter(robot=robot).select_related("user").first()
+    active = current is not None and current.active
+    payload = LeaseUpdate(
+        type="lease.update",
+        id=robot.pk,
+        robot=robot.name,
+        holder=current.user.username if active else None,
+        expires_at=current.expires_at.isoformat() if active else None,
+    )
+    send_on_commit(FLEET_GROUP, payload)
+    send_on_commit(robot_group(robot.pk), payload)
+
+
+def goal(robot, name: str | None, x: float | None, y: float | None) -> None:
+    """A robot's current goal changed (None clears it); the map draws it."""
+    payload = GoalUpdate(type="robot.goal", id=robot.pk, robot=robot.name, name=name, x=x, y=y)
+    send_on_commit(FLEET_GROUP, payload)
+    send_on_commit(robot_group(robot.pk), payload)
+
+
+def registration(endpoint: str, stage: str, message: str = "", robots=(), ok: bool | None = None) -> None:
+    """Progress of one endpoint's registration, for the registration page."""
+    send_on_commit(
+        FLEET_GROUP,
+        RegistrationProgress(
+            type="registration.progress",
+            endpoint=endpoint,
+            stage=stage,
+            message=message,
+            robots=list(robots),
+            ok=ok,
+        ),
+    )
+
+
+def poses(batch: list[RobotPose]) -> PoseBatch:
+    """The message for one tick of poses (sent by fleet.poses, which owns the rate)."""
+    return PoseBatch(type="fleet.poses", poses=batch)
+
+
+def fleet_snapshot() -> dict:
+    """What a new dashboard subscriber sees first: every robot, its lease, goal, pose, and recent instructions."""
+    from fleet.snapshots import fleet_state
+
+    return {"type": "snapshot", **fleet_state()}
+
+
+def robot_snapshot(robot) -> dict:
+    """What a new robot-page subscriber sees first."""
+    from fleet.snapshots import robot_state
+
+    return {"type": "snapshot", **robot_state(robot)}
