@@ -1,0 +1,237 @@
+"""Turn experiment results into summary.json, one JSON per experiment, REPORT.md and PNG plots.
+
+An experiment result is a dict: {"title", "status": "ok"|"partial"|"skipped"|"error", "reason",
+"cells": [{"table", "section", "row", "column", "value", "n"}], "summary": {summary key: value}, "notes": [...],
+"profile": "text", ...}. Cells place our medians in the paper's tables, so the report shows both side by side.
+"""
+
+import json
+from pathlib import Path
+
+from bench import paper
+
+SUMMARY_KEYS = (
+    "command_latency_ms",
+    "direct_latency_ms",
+    "stop_latency_ms",
+    "registration_s",
+    "identification_ms_1200_topics",
+    "interpreter_per_s",
+    "sim_realtime_robots",
+    "live_staleness_ms",
+    "success_rate",
+)
+
+# (summary path, comparison, threshold, what the issue asks)
+GOALS = (
+    (("command_latency_ms", "1", "p99"), "<=", 20, "command to robot p99 ≤ 20 ms, 1 robot"),
+    (("command_latency_ms", "100", "p99"), "<=", 50, "command to robot p99 ≤ 50 ms, 100 moving"),
+    (("stop_latency_ms", "p99"), "<=", 20, "stop p99 ≤ 20 ms with 100 instructions queued"),
+    (("registration_s", "100"), "<=", 5, "100 robots registered in ≤ 5 s"),
+    (("identification_ms_1200_topics",), "<=", 100, "identification of a 1,200-topic robot ≤ 100 ms"),
+    (("interpreter_per_s",), ">=", 2000, "interpreter ≥ 2,000 instructions/s"),
+    (("sim_realtime_robots",), ">=", 500, "simulator ≥ 500 robots at real time"),
+    (("live_staleness_ms", "p99"), "<=", 200, "live staleness p99 ≤ 200 ms, 200 robots, 10 clients"),
+    (("success_rate", "no_nav"), ">=", 0.99, "success rate ≥ 99 % without navigation"),
+    (("success_rate", "nav"), ">=", 0.99, "success rate ≥ 99 % with navigation"),
+)
+
+
+def build_summary(results: dict[str, dict]) -> dict:
+    """Merge each experiment's "summary" part into the fixed shape; what nobody measured stays None."""
+    summary = {
+        "command_latency_ms": {n: {"p50": None, "p99": None} for n in ("1", "10", "100")},
+        "direct_latency_ms": {n: {"p50": None, "p99": None} for n in ("1", "10", "100")},
+        "stop_latency_ms": {"p50": None, "p99": None, "robots": None, "queued": None},
+        "registration_s": {"1": None, "10": None, "100": None},
+        "identification_ms_1200_topics": None,
+        "interpreter_per_s": None,
+        "sim_realtime_robots": None,
+        "live_staleness_ms": {"p50": None, "p99": None, "robots": None, "clients": None},
+        "success_rate": {"no_nav": None, "nav": None},
+    }
+    for result in results.values():
+        for key, value in (result.get("summary") or {}).items():
+            if key not in summary:
+                raise ValueError(f"summary: unknown key {key!r} (allowed: {', '.join(SUMMARY_KEYS)})")
+            summary[key] = _merge(summary[key], value)
+    return summary
+
+
+def _merge(template, value):
+    """Fill a template dict from value without adding keys; scalars replace."""
+    if isinstance(template, dict) and isinstance(value, dict):
+        return {k: _merge(template[k], value[k]) if k in value else template[k] for k in template}
+    return value
+
+
+def lookup(summary: dict, path: tuple[str, ...]):
+    node = summary
+    for part in path:
+        if not isinstance(node, dict):
+            return None
+        node = node.get(part)
+    return node
+
+
+def goal_rows(summary: dict) -> list[dict]:
+    """Each goal with our value and met / missed / not measured."""
+    rows = []
+    for path, op, limit, text in GOALS:
+        value = lookup(summary, path)
+        if value is None:
+            verdict = "not measured"
+        else:
+            verdict = "met" if (value <= limit if op == "<=" else value >= limit) else "MISSED"
+        rows.append({"goal": text, "key": ".".join(path), "value": value, "verdict": verdict})
+    return rows
+
+
+def our_table(table: paper.PaperTable, results: dict[str, dict]) -> dict[tuple[str, str, int], dict]:
+    """Our cells for one paper table, keyed like the paper's (section, row label, column)."""
+    cells = {}
+    for result in results.values():
+        for cell in result.get("cells", []):
+            if cell["table"] == table.number:
+                cells[(cell["section"], cell["row"], cell["column"])] = cell
+    return cells
+
+
+def write_all(results: dict[str, dict], out_dir: Path, mode: str, meta: dict | None = None) -> dict:
+    """Write every output file; return the summary."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name, result in results.items():
+        (out_dir / f"{name}.json").write_text(json.dumps(result, indent=1, default=str) + "\n")
+    summary = build_summary(results)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
+    plots = write_plots(results, out_dir)
+    text = render_markdown(results, summary, mode, plots, meta or {})
+    (out_dir / "REPORT.md").write_text(text)
+    return summary
+
+
+def _fmt(value, digits: int = 3) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, float):
+        return f"{value:.{digits}f}"
+    return str(value)
+
+
+def render_headline(summary: dict) -> str:
+    """The headline table (goals and our numbers), for REPORT.md and the README."""
+    lines = ["| goal | ours | verdict |", "|---|---|---|"]
+    for row in goal_rows(summary):
+        lines.append(f"| {row['goal']} | {_fmt(row['value'])} | {row['verdict']} |")
+    return "\n".join(lines)
+
+
+def render_table(table: paper.PaperTable, results: dict[str, dict]) -> str:
+    """The paper's table with 'paper / ours' in every cell, same rows and columns."""
+    ours = our_table(table, results)
+    head = f"| {table.row_quantity} | " + " | ".join(table.columns) + " |"
+    lines = [
+        f"**Table {table.number}: {table.title}** (unit: {table.unit}; each cell: paper / ours)",
+        "",
+        head,
+        "|" + "---|" * (len(table.columns) + 1),
+    ]
+    for section in table.sections:
+        lines.append(f"| *{section.name}* |" + " |" * len(table.columns))
+        for row in section.rows:
+            cells = []
+            for i, value in enumerate(row.values):
+                cell = ours.get((section.name, row.label, i))
+                cells.append(f"{_fmt(value)} / {_fmt(cell['value'] if cell else None)}")
+            lines.append(f"| {row.label} | " + " | ".join(cells) + " |")
+    notes = list(table.notes) + sorted({c.get("note", "") for c in ours.values()} - {""})
+    if notes:
+        lines += ["", "Notes: " + "; ".join(notes) + "."]
+    return "\n".join(lines)
+
+
+def render_markdown(results: dict[str, dict], summary: dict, mode: str, plots: list[str], meta: dict) -> str:
+    parts = [f"# Benchmark report ({mode} run)", ""]
+    if meta:
+        parts += ["Run: " + ", ".join(f"{k} {v}" for k, v in meta.items()), ""]
+    parts += [
+        "Medians unless stated; the machine is shared and noisy. `–` means not measured (see Status).",
+        "",
+        "## Goals",
+        "",
+        render_headline(summary),
+        "",
+    ]
+    parts += ["## Status of each experiment", "", "| experiment | status | why / notes |", "|---|---|---|"]
+    for name, result in results.items():
+        why = "; ".join(filter(None, [result.get("reason", ""), *result.get("notes", [])]))
+        parts.append(f"| {name}: {result.get('title', '')} | {result.get('status', '?')} | {why or '–'} |")
+    parts += ["", "## The paper's tables and ours", ""]
+    for table in paper.TABLES.values():
+        parts += [render_table(table, results), ""]
+    profiles = [(n, r["profile"]) for n, r in results.items() if r.get("profile")]
+    if profiles:
+        parts += ["## Profiles (where the time goes)", ""]
+        for name, text in profiles:
+            parts += [f"### {name}", "", "```", text.rstrip(), "```", ""]
+    if plots:
+        parts += ["## Plots", ""] + [f"![{p}]({p})" for p in plots] + [""]
+    return "\n".join(parts)
+
+
+def write_plots(results: dict[str, dict], out_dir: Path) -> list[str]:
+    """One PNG per paper table we have cells for, plus the series experiments offer; return the file names."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = []
+    for table in paper.TABLES.values():
+        ours = our_table(table, results)
+        if not ours:
+            continue
+        fig = _table_figure(plt, table, ours)
+        name = f"table{table.number}.png"
+        fig.savefig(out_dir / name, dpi=90)
+        plt.close(fig)
+        names.append(name)
+    for result in results.values():
+        for series in result.get("series", []):
+            fig, ax = plt.subplots(figsize=(6, 4))
+            for label, points in series["lines"].items():
+                xs, ys = (
+                    zip(*[(x, y) for x, y in points if y is not None], strict=True) if points else ((), ())
+                )
+                ax.plot(xs, ys, marker="o", label=label)
+            ax.set(title=series["title"], xlabel=series["x"], ylabel=series["y"])
+            if series.get("logx"):
+                ax.set_xscale("log", base=2)
+            ax.legend()
+            ax.grid(alpha=0.3)
+            fig.tight_layout()
+            fig.savefig(out_dir / series["file"], dpi=90)
+            plt.close(fig)
+            names.append(series["file"])
+    return names
+
+
+def _table_figure(plt, table: paper.PaperTable, ours: dict):
+    """Bars: the paper's value and ours for every cell of the table."""
+    labels, theirs, mine = [], [], []
+    for section in table.sections:
+        for row in section.rows:
+            for i, value in enumerate(row.values):
+                cell = ours.get((section.name, row.label, i))
+                labels.append(f"{section.name.split()[0][:5]} {row.label.split('=')[-1].strip()} c{i + 1}")
+                theirs.append(value)
+                mine.append(cell["value"] if cell and cell["value"] is not None else 0.0)
+    fig, ax = plt.subplots(figsize=(max(6, len(labels) * 0.35), 4))
+    xs = range(len(labels))
+    ax.bar([x - 0.2 for x in xs], theirs, width=0.4, label="paper")
+    ax.bar([x + 0.2 for x in xs], mine, width=0.4, label="ours")
+    ax.set_xticks(list(xs), labels, rotation=90, fontsize=6)
+    ax.set(title=f"Table {table.number}", ylabel=table.unit)
+    ax.legend()
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,100 @@
+"""The report generator on a tiny made-up run: summary shape, side-by-side tables, plots, goal verdicts."""
+
+import json
+
+import pytest
+
+from bench import report
+from bench.stats import percentile, summarize
+
+TINY = {
+    "exp1_direct": {
+        "title": "direct publish",
+        "status": "ok",
+        "cells": [
+            {
+                "table": 3,
+                "section": "StartResponse (s)",
+                "row": "ω_z^s = 0.0 rad/s",
+                "column": 0,
+                "value": 0.123,
+            },
+        ],
+        "summary": {"direct_latency_ms": {"1": {"p50": 1.5, "p99": 3.0}}},
+        "series": [
+            {
+                "title": "t",
+                "x": "robots",
+                "y": "ms",
+                "file": "series.png",
+                "logx": True,
+                "lines": {"ours": [(1, 1.0), (2, 2.0)]},
+            }
+        ],
+    },
+    "interp": {
+        "title": "interpreter",
+        "status": "ok",
+        "summary": {"interpreter_per_s": 1500.0},
+        "profile": "ncalls tottime\n 10 0.5 parse",
+    },
+    "staleness": {"title": "live", "status": "skipped", "reason": "no consumer yet"},
+}
+
+
+def test_summary_has_exactly_the_agreed_keys_and_shape(tmp_path):
+    summary = report.write_all(TINY, tmp_path, "quick")
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert on_disk == summary
+    assert tuple(summary) == report.SUMMARY_KEYS
+    assert set(summary["command_latency_ms"]) == {"1", "10", "100"}
+    assert set(summary["command_latency_ms"]["1"]) == {"p50", "p99"}
+    assert set(summary["stop_latency_ms"]) == {"p50", "p99", "robots", "queued"}
+    assert set(summary["live_staleness_ms"]) == {"p50", "p99", "robots", "clients"}
+    assert set(summary["success_rate"]) == {"no_nav", "nav"}
+    assert summary["direct_latency_ms"]["1"] == {"p50": 1.5, "p99": 3.0}
+    assert summary["direct_latency_ms"]["10"] == {"p50": None, "p99": None}
+    assert summary["interpreter_per_s"] == 1500.0
+
+
+def test_each_experiment_gets_its_json_and_the_report_and_plots_exist(tmp_path):
+    report.write_all(TINY, tmp_path, "quick")
+    for name in TINY:
+        assert json.loads((tmp_path / f"{name}.json").read_text())["title"] == TINY[name]["title"]
+    text = (tmp_path / "REPORT.md").read_text()
+    assert "0.871 / 0.123" in text  # the paper's cell and ours side by side
+    assert "0.807 / –" in text
+    assert "no consumer yet" in text
+    assert "ncalls tottime" in text
+    assert (tmp_path / "table3.png").stat().st_size > 0
+    assert (tmp_path / "series.png").stat().st_size > 0
+    assert not (tmp_path / "table4.png").exists()
+
+
+def test_goal_verdicts_say_met_missed_or_not_measured(tmp_path):
+    summary = report.write_all(TINY, tmp_path, "quick")
+    verdicts = {row["key"]: row["verdict"] for row in report.goal_rows(summary)}
+    assert verdicts["interpreter_per_s"] == "MISSED"
+    assert verdicts["sim_realtime_robots"] == "not measured"
+    summary["sim_realtime_robots"] = 800
+    assert {r["key"]: r["verdict"] for r in report.goal_rows(summary)}["sim_realtime_robots"] == "met"
+
+
+def test_a_report_table_has_the_papers_rows_and_columns():
+    text = report.render_table(report.paper.TABLE_13, {})
+    body = [line for line in text.splitlines() if line.startswith("| ") and "/" in line]
+    assert len(body) == 3
+    assert all(line.count(" / ") == 4 for line in body)
+
+
+def test_unknown_summary_key_is_refused():
+    with pytest.raises(ValueError, match="unknown key 'speed'"):
+        report.build_summary({"x": {"summary": {"speed": 1}}})
+
+
+def test_percentiles_interpolate_and_refuse_bad_q():
+    assert percentile([1, 2, 3, 4], 50) == 2.5
+    assert percentile([], 50) is None
+    assert summarize([3.0, 1.0, 2.0])["p50"] == 2.0
+    with pytest.raises(ValueError, match="within 0..100"):
+        percentile([1], 101)
