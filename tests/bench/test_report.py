@@ -96,5 +96,5 @@ def test_percentiles_interpolate_and_refuse_bad_q():
     assert percentile([1, 2, 3, 4], 50) == 2.5
     assert percentile([], 50) is None
     assert summarize([3.0, 1.0, 2.0])["p50"] == 2.0
-    with pytest.raises(ValueError, match="within 0..100"):
+    with pytest.raises(ValueError, match=r"within 0\.\.100"):
         percentile([1], 101)
