@@ -109,7 +109,10 @@ def load_map(yaml_path: str | Path) -> OccupancyGrid:
     image = Path(meta["image"])
     if not image.is_absolute():
         image = path.parent / image
-    width, height, maxval, pixels = _read_pgm(image)
+    try:
+        width, height, maxval, pixels = _read_pgm(image)
+    except MapFormatError as exc:
+        raise MapFormatError(f"{path}: {exc}") from None
     data = [0] * (width * height)
     convert = _pixel_converter(meta, maxval)
     for j in range(height):
@@ -183,18 +186,18 @@ def _read_pgm(path: Path) -> tuple[int, int, int, bytes]:
     try:
         raw = path.read_bytes()
     except OSError as exc:
-        raise MapFormatError(f"{path}: cannot read image ({exc.strerror})") from exc
+        raise MapFormatError(f"cannot read image {path} ({exc.strerror})") from exc
     magic = raw[:2]
     if magic not in (b"P5", b"P2"):
-        raise MapFormatError(f"{path}: not a PGM image (magic {magic!r}, expected P5 or P2)")
+        raise MapFormatError(f"image {path.name} is not a PGM image (magic {magic!r}, expected P5 or P2)")
     tokens, pos = _pgm_header(raw, path)
     width, height, maxval = tokens
     if width <= 0 or height <= 0 or not 0 < maxval < 256:
-        raise MapFormatError(f"{path}: unsupported PGM size {width}x{height} maxval {maxval}")
+        raise MapFormatError(f"image {path.name}: unsupported PGM size {width}x{height} maxval {maxval}")
     n = width * height
     pixels = raw[pos : pos + n] if magic == b"P5" else bytes(int(t) for t in raw[pos:].split()[:n])
     if len(pixels) != n:
-        raise MapFormatError(f"{path}: truncated PGM ({len(pixels)} of {n} pixels)")
+        raise MapFormatError(f"image {path.name}: truncated PGM ({len(pixels)} of {n} pixels)")
     return width, height, maxval, pixels
 
 
@@ -212,7 +215,7 @@ def _pgm_header(raw: bytes, path: Path) -> tuple[list[int], int]:
         while end < len(raw) and raw[end : end + 1].isdigit():
             end += 1
         if end == pos:
-            raise MapFormatError(f"{path}: malformed PGM header")
+            raise MapFormatError(f"image {path.name}: malformed PGM header")
         tokens.append(int(raw[pos:end]))
         pos = end
     return tokens, pos + 1

@@ -1,0 +1,34 @@
+"""Run a world in the foreground until SIGINT / SIGTERM (management command and Celery task)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+from collections.abc import Callable
+
+from simworker.fleet import SimFleet
+
+
+def serve_world(
+    world: str = "paper",
+    host: str = "127.0.0.1",
+    port_base: int | None = 9090,
+    extra: int = 0,
+    time_scale: float = 1.0,
+    out: Callable[[str], None] = print,
+) -> dict:
+    """Serve the world, print one line per endpoint when ready, return the loop's stats when stopped."""
+    fleet = SimFleet(world, host, port_base, extra, time_scale=time_scale)
+
+    def ready(f: SimFleet) -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(ValueError, RuntimeError):  # not the main thread (e.g. a worker pool)
+                loop.add_signal_handler(sig, f.request_stop)
+        for key, url in f.urls.items():
+            out(f"simworker: {key} ready at {url}")
+
+    asyncio.run(fleet.run(on_ready=ready))
+    out(f"simworker: stopped after {fleet.stats.steps} steps")
+    return {"steps": fleet.stats.steps, "late_steps": fleet.stats.late_steps, "urls": fleet.urls}

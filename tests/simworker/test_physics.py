@@ -1,0 +1,77 @@
+"""The pymunk physics: limits, command timeout, walls, laser."""
+
+import math
+
+import pytest
+
+from simworker.models_catalog import model
+from simworker.physics import Physics
+from simworker.world import load_world
+
+
+@pytest.fixture
+def physics():
+    """An empty paper world with no robots yet."""
+    return Physics(load_world("paper").map)
+
+
+def run(physics, seconds, robot=None, cmd=None):
+    for i in range(round(seconds / physics.dt)):
+        if robot is not None and cmd is not None and i % 5 == 0:
+            robot.command(*cmd)
+        physics.step()
+
+
+def test_robot_accelerates_within_the_limit_to_the_commanded_speed(physics):
+    tb = physics.add_robot("tb", model("turtlebot3_burger"), -2.0, -0.5, 0.0)
+    tb.command(0.2, 0.0)
+    physics.step()
+    assert tb.twist()[0] == pytest.approx(2.5 * physics.dt)  # acc_lim_x 2.5 m/s^2
+    run(physics, 1.0, tb, (0.2, 0.0))
+    assert tb.twist()[0] == pytest.approx(0.2)
+    assert tb.pose()[0] > -2.0 + 0.19
+
+
+def test_commands_are_clamped_to_the_controller_limits(physics):
+    tb = physics.add_robot("tb", model("turtlebot3_burger"), -2.0, -0.5, 0.0)
+    run(physics, 1.0, tb, (5.0, 0.0))
+    assert tb.twist()[0] == pytest.approx(0.22)
+
+
+def test_robot_stops_after_the_command_times_out(physics):
+    tb = physics.add_robot("tb", model("turtlebot3_burger"), -2.0, -0.5, 0.0)
+    tb.command(0.2, 0.0)
+    run(physics, 1.0)
+    assert tb.twist()[0] == pytest.approx(0.0)
+    assert 0.05 < tb.pose()[0] + 2.0 < 0.12  # moved only until the 0.5 s timeout
+
+
+def test_robot_driven_at_a_wall_stops_at_it(physics):
+    husky = physics.add_robot("h", model("husky"), -4.0, -1.0, math.pi)  # facing the west wall at x = -6
+    run(physics, 6.0, husky, (1.0, 0.0))
+    x = husky.pose()[0]
+    assert x - 0.4937 >= -6.0 - 0.02  # its front never enters the wall
+    assert x < -5.4  # it got there
+    run(physics, 1.0, husky, (1.0, 0.0))
+    assert husky.pose()[0] == pytest.approx(x, abs=0.01)  # and stays, still commanded
+
+
+def test_robots_collide_with_each_other(physics):
+    a = physics.add_robot("a", model("tiago"), 0.0, -1.5, 0.0)
+    b = physics.add_robot("b", model("husky"), 1.5, -1.5, 0.0)
+    run(physics, 3.0, a, (0.5, 0.0))
+    assert b.pose()[0] - a.pose()[0] >= 0.275 + 0.4937 - 0.05
+
+
+def test_legged_robot_moves_sideways(physics):
+    spot = physics.add_robot("s", model("spot"), 4.0, 1.5, 0.0)
+    run(physics, 1.0, spot, (0.0, 0.0, 0.3))
+    assert spot.pose()[1] > 1.5 + 0.2
+
+
+def test_laser_sees_the_wall_and_reports_none_out_of_range(physics):
+    tb = physics.add_robot("tb", model("turtlebot3_burger"), -5.0, -1.5, 0.0)
+    ranges = physics.scan(tb, model("turtlebot3_burger").laser)
+    assert len(ranges) == 360
+    assert ranges[180] == pytest.approx(1.0, abs=0.03)  # facing west: the wall at x = -6
+    assert ranges[0] is None  # east: nothing within 3.5 m
