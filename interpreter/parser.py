@@ -494,7 +494,7 @@ def _check_concept(dest: Dest, spec, draft, grammar) -> Problem | None:
 def _not_accepted(dest: Dest, spec, grammar) -> Problem:
     what = grammar.lexicon.class_descriptions.get(dest.cls or "", "not a place on the map")
     q = (
-        f"'{dest.name}' is {_article(what)} — not a place on the map, so robots cannot {spec.name} there. "
+        f"'{dest.name}' is {what} — not a place on the map, so robots cannot {spec.name} there. "
         f"Choose a location ({_place_names(grammar)}) or coordinates like {_EXAMPLE_COORDS}."
     )
     return Problem("III", "invalid_destination", dest.name, q)
@@ -605,10 +605,6 @@ def _describe(step: dict) -> str:
     if step["speed"]:
         text += f" ({step['speed']})"
     return text
-
-
-def _article(text: str) -> str:
-    return ("an " if text[:1].lower() in "aeiou" else "a ") + text
 
 
 def _place_names(grammar, limit: int = 12) -> str:
