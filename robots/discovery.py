@@ -1,0 +1,383 @@
+"""Read one rosbridge endpoint's ROS graph through rosapi and split it into robots (no Django).
+
+Calls (protocol §4): /rosapi/topics (names and types), /rosapi/nodes then /rosapi/node_details per node
+(publishers and subscribers come from these: one call per node, not two per topic), /rosapi/services then
+/rosapi/service_type per service, /rosapi/action_servers, /rosapi/get_param_names, and /rosapi/get_param
+only for the params registration uses (robot_description, velocity limits, initial pose). The per-item
+calls run through asyncio.gather under a semaphore, so 1,200 topics cost a few dozen round-trip times.
+
+Robots on one endpoint (see `namespaces`): a first-level namespace is a robot when it holds a
+robot_description param (`/robot1/robot_description`, ROS 2 `/robot1/robot_state_publisher:robot_description`)
+or at least two nodes and a velocity topic somebody subscribes to. Each such namespace is one robot named
+after it ("robot1"); root-level topics of a namespaced endpoint are shared and appear in every robot's graph.
+An endpoint without namespaces is one robot, named after the URDF's `<robot name=...>` if there is one,
+else `<host>-<port>` of the endpoint.
+
+Infrastructure is never a robot nor a robot's topic (protocol §7): rosapi, rosbridge_websocket, rosout,
+/client_count, /connected_clients, /parameter_events, /gazebo/*, */get_loggers, */set_logger_level and the
+ROS 2 per-node parameter services. The `/gazebo` node itself stays: its plugins publish robot topics.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+from dataclasses import dataclass, field
+from urllib.parse import urlparse
+
+from robots import urdf
+from robots.rosbridge import RosbridgeClient, RosbridgeError, ServiceError
+
+INFRA_TOPICS = {"/rosout", "/rosout_agg", "/client_count", "/connected_clients", "/parameter_events"}
+INFRA_PREFIXES = ("/rosapi", "/rosbridge_websocket", "/gazebo/", "/rosout/")
+INFRA_NODES = {"/rosapi", "/rosapi_params", "/rosbridge_websocket", "/rosout", "/gazebo_gui"}
+INFRA_SERVICE_SUFFIXES = (
+    "/get_loggers",
+    "/set_logger_level",
+    "/describe_parameters",
+    "/get_parameter_types",
+    "/get_parameters",
+    "/list_parameters",
+    "/set_parameters",
+    "/set_parameters_atomically",
+)
+INFRA_PARAMS = {"/rosdistro", "/rosversion", "/run_id"}
+WANTED_PARAMS = re.compile(r"robot_description$|max_vel|initial_pose|initialpose")
+VELOCITY_TYPES = {"geometry_msgs/Twist", "geometry_msgs/TwistStamped"}
+ROS1_ACTION_PARTS = ("goal", "cancel", "status", "result", "feedback")
+
+
+def norm_type(type_: str) -> str:
+    """Spell a type as ROS 1 does (`pkg/msg/Type` -> `pkg/Type`)."""
+    return type_.replace("/msg/", "/").replace("/srv/", "/").replace("/action/", "/")
+
+
+def is_infra(name: str, kind: str = "topic") -> bool:
+    """Tell whether a topic, service, node or param name belongs to the ROS/rosbridge infrastructure."""
+    if kind == "node":
+        return name in INFRA_NODES or name.startswith(("/rosapi", "/rosbridge_websocket"))
+    if kind == "param":
+        base = name.split(":", 1)[0]
+        return name in INFRA_PARAMS or base.startswith(INFRA_PREFIXES)
+    if name in INFRA_TOPICS or name.startswith(INFRA_PREFIXES) or name == "/gazebo":
+        return True
+    return kind == "service" and name.endswith(INFRA_SERVICE_SUFFIXES)
+
+
+@dataclass
+class TopicInfo:
+    name: str
+    type: str
+    publishers: list[str] = field(default_factory=list)
+    subscribers: list[str] = field(default_factory=list)
+
+
+@dataclass
+class Graph:
+    """The non-infrastructure ROS graph of an endpoint, or of one robot on it."""
+
+    url: str
+    ros_version: int = 1
+    namespace: str = ""
+    name: str = ""
+    topics: dict[str, TopicInfo] = field(default_factory=dict)
+    nodes: dict[str, dict[str, list[str]]] = field(default_factory=dict)
+    services: dict[str, str] = field(default_factory=dict)
+    actions: dict[str, str] = field(default_factory=dict)
+    params: dict[str, str | None] = field(default_factory=dict)  # name -> JSON text (None: not read)
+    urdf: urdf.URDFFacts | None = None
+    urdf_error: str = ""
+    start_pose: list[float] | None = None
+    start_pose_source: str = ""
+
+    def relative(self, name: str) -> str:
+        """Name without this robot's namespace ("/robot1/cmd_vel" -> "cmd_vel")."""
+        ns = self.namespace
+        return name[len(ns) + 1 :] if ns and name.startswith(ns + "/") else name.lstrip("/")
+
+
+async def discover(url: str, client: RosbridgeClient | None = None, concurrency: int = 64) -> list[Graph]:
+    """Discover one endpoint and return one Graph per robot; RosbridgeError with a one-line reason."""
+    own = client is None
+    client = client or RosbridgeClient(url)
+    try:
+        if own:
+            await client.connect()
+        whole = await read_graph(client, url, asyncio.Semaphore(concurrency))
+        robots = split(whole)
+        await asyncio.gather(*(read_robot_facts(client, g) for g in robots))
+        return robots
+    finally:
+        if own:
+            await client.close()
+
+
+async def read_graph(client: RosbridgeClient, url: str, sem: asyncio.Semaphore) -> Graph:
+    """Read topics, nodes with details, services with types, actions and param names."""
+    try:
+        topics = await client.call_service("/rosapi/topics")
+    except ServiceError as exc:
+        raise RosbridgeError(f"{url}: rosapi does not answer /rosapi/topics ({exc})") from None
+    except RosbridgeError as exc:
+        if "no answer" in str(exc):
+            raise type(exc)(f"{exc} (is rosapi running?)") from None
+        raise
+    graph = Graph(url=url)
+    _topics(graph, topics)
+    nodes, services, names, actions, version = await asyncio.gather(
+        _optional(client, "/rosapi/nodes", "nodes"),
+        _optional(client, "/rosapi/services", "services"),
+        _optional(client, "/rosapi/get_param_names", "names"),
+        _optional(client, "/rosapi/action_servers", "action_servers"),
+        _optional(client, "/rosapi/get_ros_version", "version", default=None),
+    )
+    graph.ros_version = _ros_version(version, graph)
+    await asyncio.gather(_nodes(client, graph, nodes, sem), _services(client, graph, services, sem))
+    graph.params = {n: None for n in names if isinstance(n, str) and not is_infra(n, "param")}
+    await _actions(client, graph, actions, sem)
+    return graph
+
+
+async def _optional(client: RosbridgeClient, service: str, key: str, default=()):
+    """Call a rosapi list service; a missing service (older rosapi) gives the default."""
+    try:
+        return (await client.call_service(service)).get(key, default)
+    except ServiceError:
+        return default
+
+
+async def _bounded(sem: asyncio.Semaphore, coro):
+    async with sem:
+        return await coro
+
+
+def _topics(graph: Graph, reply: dict) -> None:
+    names, types = reply.get("topics"), reply.get("types")
+    if not isinstance(names, list) or not isinstance(types, list):
+        raise RosbridgeError(f"{graph.url}: /rosapi/topics answered without topic and type lists")
+    for name, type_ in zip(names, types, strict=False):
+        if isinstance(name, str) and not is_infra(name):
+            graph.topics[name] = TopicInfo(name, type_ if isinstance(type_, str) else "")
+
+
+def _ros_version(version, graph: Graph) -> int:
+    """ROS 2 if rosapi says so (get_ros_version exists only there) or types are spelled pkg/msg/Type."""
+    if isinstance(version, int) and version in (1, 2):
+        return version
+    return 2 if any("/msg/" in t.type for t in graph.topics.values()) else 1
+
+
+async def _nodes(client: RosbridgeClient, graph: Graph, nodes, sem: asyncio.Semaphore) -> None:
+    names = [n for n in nodes if isinstance(n, str) and not is_infra(n, "node")]
+    details = await asyncio.gather(
+        *(_bounded(sem, client.call_service("/rosapi/node_details", {"node": n})) for n in names),
+        return_exceptions=True,
+    )
+    for name, detail in zip(names, details, strict=True):
+        if isinstance(detail, ServiceError):
+            detail = {}
+        elif isinstance(detail, BaseException):
+            raise detail
+        entry = {
+            k: [x for x in detail.get(k, []) if isinstance(x, str)]
+            for k in ("publishing", "subscribing", "services")
+        }
+        graph.nodes[name] = entry
+        for key, side in (("publishing", "publishers"), ("subscribing", "subscribers")):
+            for topic in entry[key]:
+                info = graph.topics.get(topic)
+                if info is not None:
+                    getattr(info, side).append(name)
+
+
+async def _services(client: RosbridgeClient, graph: Graph, services, sem: asyncio.Semaphore) -> None:
+    names = [s for s in services if isinstance(s, str) and not is_infra(s, "service")]
+    replies = await asyncio.gather(
+        *(_bounded(sem, client.call_service("/rosapi/service_type", {"service": s})) for s in names),
+        return_exceptions=True,
+    )
+    for name, reply in zip(names, replies, strict=True):
+        if isinstance(reply, BaseException) and not isinstance(reply, ServiceError):
+            raise reply
+        graph.services[name] = reply.get("type", "") if isinstance(reply, dict) else ""
+
+
+async def _actions(client: RosbridgeClient, graph: Graph, servers, sem: asyncio.Semaphore) -> None:
+    """Action servers with their types: ROS 1 from the goal topic, ROS 2 from the hidden feedback topic."""
+    found = {s for s in servers if isinstance(s, str)}
+    if graph.ros_version == 1:
+        found |= {
+            t.rsplit("/", 1)[0]
+            for t in graph.topics
+            if t.endswith("/goal") and all(f"{t[:-5]}/{p}" in graph.topics for p in ROS1_ACTION_PARTS)
+        }
+        for name in sorted(found):
+            goal = graph.topics.get(f"{name}/goal")
+            graph.actions[name] = (
+                goal.type.removesuffix("Goal") if goal and goal.type.endswith("ActionGoal") else ""
+            )
+        return
+    names = sorted(found)
+    replies = await asyncio.gather(
+        *(
+            _bounded(sem, client.call_service("/rosapi/topic_type", {"topic": f"{n}/_action/feedback"}))
+            for n in names
+        ),
+        return_exceptions=True,
+    )
+    for name, reply in zip(names, replies, strict=True):
+        type_ = reply.get("type", "") if isinstance(reply, dict) else ""
+        graph.actions[name] = type_.removesuffix("_FeedbackMessage")
+
+
+def namespaces(graph: Graph) -> list[str]:
+    """First-level namespaces that are robots (see the module docstring)."""
+    found = set()
+    for name in graph.params:
+        node = name.split(":", 1)[0] if ":" in name else name.rsplit("/", 1)[0]
+        if (
+            name.endswith("robot_description")
+            and node.count("/") >= (2 if ":" in name else 1)
+            and node != "/"
+        ):
+            found.add("/" + node.split("/")[1])
+    per_ns: dict[str, int] = {}
+    for node in graph.nodes:
+        if node.count("/") >= 2:
+            per_ns[_first(node)] = per_ns.get(_first(node), 0) + 1
+    for info in graph.topics.values():
+        ns = _first(info.name)
+        deep = info.name.count("/") >= 2 and per_ns.get(ns, 0) >= 2
+        if deep and info.subscribers and norm_type(info.type) in VELOCITY_TYPES:
+            found.add(ns)
+    return sorted(found)
+
+
+def _first(name: str) -> str:
+    return "/" + name.split("/")[1]
+
+
+def split(graph: Graph) -> list[Graph]:
+    """One Graph per robot: per namespace, or the whole endpoint as one robot."""
+    spaces = namespaces(graph)
+    if not spaces:
+        return [_subgraph(graph, "", lambda name: True)]
+    return [_subgraph(graph, ns, _in_namespace(ns, spaces)) for ns in spaces]
+
+
+def _in_namespace(ns: str, spaces: list[str]):
+    prefix = ns + "/"
+
+    def keep(name: str) -> bool:
+        return name.startswith(prefix) or (
+            name.split(":", 1)[0].count("/") == 1 and _first(name) not in spaces
+        )
+
+    return keep
+
+
+def _subgraph(graph: Graph, ns: str, keep) -> Graph:
+    sub = Graph(url=graph.url, ros_version=graph.ros_version, namespace=ns)
+    sub.topics = {n: t for n, t in graph.topics.items() if keep(n)}
+    sub.nodes = {n: d for n, d in graph.nodes.items() if n.startswith(ns + "/") or not ns}
+    sub.services = {n: t for n, t in graph.services.items() if keep(n)}
+    sub.actions = {n: t for n, t in graph.actions.items() if keep(n)}
+    sub.params = {n: v for n, v in graph.params.items() if n.startswith(ns + "/") or not ns}
+    sub.name = ns.strip("/")
+    return sub
+
+
+async def read_robot_facts(client: RosbridgeClient, graph: Graph) -> None:
+    """Fetch the params registration uses, parse the URDF, name the robot, read its start pose."""
+    wanted = [n for n in graph.params if WANTED_PARAMS.search(n)]
+    values = await asyncio.gather(
+        *(client.call_service("/rosapi/get_param", {"name": n}) for n in wanted), return_exceptions=True
+    )
+    for name, reply in zip(wanted, values, strict=True):
+        if isinstance(reply, dict):
+            graph.params[name] = reply.get("value")
+    _read_urdf(graph)
+    if not graph.name:
+        graph.name = graph.urdf.name if graph.urdf and graph.urdf.name else endpoint_label(graph.url)
+    graph.start_pose, graph.start_pose_source = await start_pose(client, graph)
+
+
+def _read_urdf(graph: Graph) -> None:
+    names = sorted(
+        (n for n in graph.params if n.endswith("robot_description")), key=lambda n: "state" not in n
+    )
+    for name in names:
+        text = decode_param(graph.params.get(name))
+        try:
+            graph.urdf = urdf.parse(text)
+            graph.urdf_error = ""
+            return
+        except urdf.URDFError as exc:
+            graph.urdf_error = f"{name}: {exc}"
+    if not names:
+        graph.urdf_error = "no robot_description param"
+
+
+def decode_param(text):
+    """Decode rosapi's JSON-encoded param value; plain text passes through."""
+    if text is None:
+        return None
+    try:
+        return json.loads(text)
+    except (TypeError, ValueError):
+        return text
+
+
+def endpoint_label(url: str) -> str:
+    """`host-port` of an endpoint URL, the name of an unnamed robot."""
+    parsed = urlparse(url)
+    return f"{parsed.hostname or 'robot'}-{parsed.port or 9090}"
+
+
+async def start_pose(
+    client: RosbridgeClient, graph: Graph, wait: float = 0.5
+) -> tuple[list[float] | None, str]:
+    """Start pose [x, y, yaw]: from params (initial_pose, amcl initial_pose_*), else the latched amcl_pose."""
+    from_params = _pose_from_params(graph)
+    if from_params:
+        return from_params
+    topic = next(
+        (n for n, t in graph.topics.items() if graph.relative(n) == "amcl_pose" and t.publishers), None
+    )
+    if topic is None:
+        return None, ""
+    got: asyncio.Future = asyncio.get_running_loop().create_future()
+    sub = await client.subscribe(topic, graph.topics[topic].type, lambda m: got.done() or got.set_result(m))
+    try:
+        msg = await asyncio.wait_for(got, wait)
+    except TimeoutError:
+        return None, ""
+    finally:
+        await client.unsubscribe(sub)
+    try:
+        return _pose_of(msg["pose"]["pose"]), topic
+    except (KeyError, TypeError, ValueError):
+        return None, ""
+
+
+def _pose_from_params(graph: Graph) -> tuple[list[float], str] | None:
+    ns = graph.namespace
+    value = decode_param(graph.params.get(f"{ns}/initial_pose"))
+    if isinstance(value, list) and len(value) >= 3 and all(isinstance(v, int | float) for v in value[:3]):
+        return [float(v) for v in value[:3]], f"{ns}/initial_pose"
+    for sep, keys in (("/", ("initial_pose_x", "initial_pose_y", "initial_pose_a")),
+                      (":", ("initial_pose.x", "initial_pose.y", "initial_pose.yaw"))):  # fmt: skip
+        names = [f"{ns}/amcl{sep}{k}" for k in keys]
+        vals = [decode_param(graph.params.get(n)) for n in names]
+        if all(isinstance(v, int | float) for v in vals):
+            return [float(v) for v in vals], names[0].rsplit(sep, 1)[0]
+    return None
+
+
+def _pose_of(pose: dict) -> list[float]:
+    import math
+
+    p, q = pose["position"], pose["orientation"]
+    yaw = math.atan2(2 * (q["w"] * q["z"] + q["x"] * q["y"]), 1 - 2 * (q["y"] ** 2 + q["z"] ** 2))
+    return [float(p["x"]), float(p["y"]), round(yaw, 6)]

@@ -1,0 +1,246 @@
+"""Which topic, action or service carries each action of a robot (the paper's Figure 12, made linear).
+
+Each topic is looked at once: its type selects the actions it could serve (a type index, so the work is
+linear in the number of topics, not the paper's O(n^4)), then a score adds up:
+- 0.5 for the right message type on the right side of the graph (move: a Twist/TwistStamped somebody
+  subscribes to; odometry: a nav_msgs/Odometry somebody publishes; navigate: a move_base / navigate_to_pose
+  action server, or a PoseStamped goal topic somebody subscribes to; ...);
+- +0.3 when the name (without the robot's namespace) is the action's canonical name ("cmd_vel", "odom",
+  "amcl_pose", "move_base"): how = exact; +0.2 when only the last segment is ("mobile_base_controller/cmd_vel");
+- +0.1 x weight for the best keyword of the paper's lists (cmd, vel, velocity, speed, travel, run; goal, amcl,
+  odom, scan, map...) or of the database's TopicKeyword rows: how = pattern;
+- +0.05 for an ontology synonym of the action in the name: how = synonym;
+- graph facts, below. The best candidate is bound with confidence = min(1, score). A tie, or no candidate
+  for move or odometry, binds nothing: needs_user, with the candidates kept for a person. Optional actions
+  (navigate, pose, scan, map, initial_pose, battery) with no candidate are simply absent, not a question.
+
+twist_mux rule (move). A node that subscribes two or more velocity topics and publishes one is a mux.
+We bind one of its INPUTS, never its output: the output is the base controller's own input
+(TIAGo /mobile_base_controller/cmd_vel, Husky /husky_velocity_controller/cmd_vel); publishing there races the
+mux and bypasses its priorities, timeouts and locks (e-stop, pause_navigation). Among the inputs we prefer the
+robot's designated external input: the one its own navigation stack publishes to (move_base or nav2's
+controller/velocity smoother: TIAGo /nav_vel, priority 10; Husky /cmd_vel, priority 1), then one named
+"cmd_vel". So a person on the robot's joystick or keyboard input (higher priority) can always override the
+web, as the vendors intend. Scores: mux output -0.3, mux input +0.1, published by the navigation stack
++0.15, input named for navigation (nav) +0.05, published by a teleop node (joy, teleop, marker) -0.1.
+Without a navigation stack TIAGo's inputs (nav_vel, key_vel, joy_vel...) tie on everything but the "nav"
+hint, which settles it; a mux whose inputs truly tie goes to a person.
+A choice a person made (how = user) is kept while its target still exists.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from robots.discovery import Graph, norm_type
+
+ACTIONS = ("move", "odometry", "pose", "navigate", "scan", "map", "initial_pose", "battery")
+ESSENTIAL = {"move", "odometry"}
+TIE = 1e-6
+
+
+@dataclass(frozen=True)
+class Rule:
+    types: frozenset[str]
+    side: str  # "sub": we command it, somebody subscribes; "pub": we listen, somebody publishes
+    canonical: tuple[str, ...]
+
+
+RULES = {
+    "move": Rule(frozenset({"geometry_msgs/Twist", "geometry_msgs/TwistStamped"}), "sub", ("cmd_vel",)),
+    "odometry": Rule(frozenset({"nav_msgs/Odometry"}), "pub", ("odom", "odometry")),
+    "pose": Rule(
+        frozenset({"geometry_msgs/PoseWithCovarianceStamped", "geometry_msgs/PoseStamped"}),
+        "pub",
+        ("amcl_pose",),
+    ),
+    "navigate": Rule(frozenset({"geometry_msgs/PoseStamped"}), "sub", ("move_base_simple/goal", "goal_pose")),
+    "scan": Rule(frozenset({"sensor_msgs/LaserScan"}), "pub", ("scan",)),
+    "map": Rule(frozenset({"nav_msgs/OccupancyGrid"}), "pub", ("map",)),
+    "initial_pose": Rule(frozenset({"geometry_msgs/PoseWithCovarianceStamped"}), "sub", ("initialpose",)),
+    "battery": Rule(frozenset({"sensor_msgs/BatteryState"}), "pub", ("battery_state", "battery")),
+}
+NAV_ACTIONS = ("move_base", "navigate_to_pose")
+
+# The paper's keyword lists (Figure 12), per action; TopicKeyword rows replace them when present.
+DEFAULT_KEYWORDS = {
+    "move": {k: 1.0 for k in ("cmd", "vel", "cmd_vel", "velocity", "speed", "travel", "run")},
+    "navigate": {
+        k: 1.0 for k in ("move_base", "map_server", "amcl", "goal", "move", "navigation", "navigate")
+    },
+    "odometry": {"odom": 1.0, "odometry": 1.0},
+    "pose": {"amcl": 1.0, "pose": 1.0},
+    "scan": {"scan": 1.0, "laser": 1.0, "lidar": 1.0},
+    "map": {"map": 1.0},
+    "initial_pose": {"initialpose": 1.0, "initial": 1.0},
+    "battery": {"battery": 1.0, "power": 0.5},
+}
+DEFAULT_SYNONYMS = {
+    "move": {"drive", "motion", "twist", "go"},
+    "navigate": {"nav", "goto", "go_to"},
+    "odometry": {"localization", "dead_reckoning"},
+    "scan": {"range", "sick", "hokuyo"},
+    "battery": {"charge", "energy"},
+}
+NAV_NODES = {"move_base", "controller_server", "velocity_smoother", "bt_navigator"}
+TELEOP_WORDS = ("teleop", "joy", "marker", "keyboard")
+
+
+@dataclass
+class Vocabulary:
+    keywords: dict[str, dict[str, float]] = field(
+        default_factory=lambda: {a: dict(k) for a, k in DEFAULT_KEYWORDS.items()}
+    )
+    synonyms: dict[str, set[str]] = field(
+        default_factory=lambda: {a: set(s) for a, s in DEFAULT_SYNONYMS.items()}
+    )
+
+
+@dataclass
+class Candidate:
+    target: str
+    type: str
+    kind: str
+    score: float
+    how: str
+
+
+@dataclass
+class Result:
+    action: str
+    target: str = ""
+    kind: str = "topic"
+    message_type: str = ""
+    how: str = "none"
+    confidence: float = 0.0
+    needs_user: bool = False
+    candidates: list[dict] = field(default_factory=list)
+
+
+@dataclass
+class Facts:
+    """Graph facts computed once per robot: twist_mux inputs and outputs, navigation and teleop outputs."""
+
+    mux_inputs: set[str] = field(default_factory=set)
+    mux_outputs: set[str] = field(default_factory=set)
+    nav_published: set[str] = field(default_factory=set)
+    teleop_published: set[str] = field(default_factory=set)
+
+
+def graph_facts(graph: Graph) -> Facts:
+    facts = Facts()
+    velocity = {n for n, t in graph.topics.items() if norm_type(t.type) in RULES["move"].types}
+    for node, detail in graph.nodes.items():
+        subs = velocity.intersection(detail.get("subscribing", ()))
+        pubs = velocity.intersection(detail.get("publishing", ()))
+        if len(subs) >= 2 and pubs:
+            facts.mux_inputs |= subs
+            facts.mux_outputs |= pubs
+        last = node.rsplit("/", 1)[-1]
+        if last in NAV_NODES:
+            facts.nav_published |= set(detail.get("publishing", ()))
+        if any(word in node for word in TELEOP_WORDS):
+            facts.teleop_published |= pubs
+    return facts
+
+
+def tokens(relative: str) -> set[str]:
+    segments = [s for s in relative.split("/") if s]
+    return set(segments) | {part for s in segments for part in s.split("_") if part}
+
+
+def name_score(
+    relative: str, action: str, vocab: Vocabulary, canonical: tuple[str, ...]
+) -> tuple[float, str]:
+    """Score a name for an action and say how it matched."""
+    if relative in canonical:
+        return 0.3 + 0.1, "exact"
+    words = tokens(relative)
+    score, how = 0.0, ""
+    if relative.rsplit("/", 1)[-1] in canonical:
+        score, how = 0.2, "pattern"
+    weights = [w for k, w in vocab.keywords.get(action, {}).items() if k in words]
+    if weights:
+        score, how = score + 0.1 * max(weights), "pattern"
+    if not how and words & vocab.synonyms.get(action, set()):
+        score, how = score + 0.05, "synonym"
+    return score, how or "pattern"
+
+
+def _move_facts(name: str, facts: Facts) -> float:
+    bonus = 0.1 if name in facts.mux_inputs else 0.0
+    bonus -= 0.3 if name in facts.mux_outputs else 0.0
+    bonus += 0.15 if name in facts.nav_published else 0.0
+    bonus -= 0.1 if name in facts.teleop_published else 0.0
+    if name in facts.mux_inputs and "nav" in tokens(name.rsplit("/", 1)[-1]):
+        bonus += 0.05
+    return bonus
+
+
+def _map_facts(name: str, facts: Facts) -> float:
+    return -0.3 if "costmap" in name else 0.0
+
+
+FACT_RULES = {"move": _move_facts, "map": _map_facts}
+
+
+def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:
+    """Score every topic once for the actions its type can serve; add action servers for navigate."""
+    facts = graph_facts(graph)
+    by_type: dict[str, list[str]] = {}
+    for action, rule in RULES.items():
+        for type_ in rule.types:
+            by_type.setdefault(type_, []).append(action)
+    found: dict[str, list[Candidate]] = {a: [] for a in ACTIONS}
+    for name, info in graph.topics.items():
+        for action in by_type.get(norm_type(info.type), ()):
+            rule = RULES[action]
+            if not (info.subscribers if rule.side == "sub" else info.publishers):
+                continue
+            score, how = name_score(graph.relative(name), action, vocab, rule.canonical)
+            extra = FACT_RULES.get(action)
+            total = 0.5 + score + (extra(name, facts) if extra else 0.0)
+            found[action].append(Candidate(name, info.type, "topic", round(total, 4), how))
+    for name, type_ in graph.actions.items():
+        relative = graph.relative(name)
+        score, how = name_score(relative, "navigate", vocab, NAV_ACTIONS)
+        if score <= 0.1 and "navigat" not in relative:
+            continue  # another action server (arm, spin, dock): not navigation
+        bonus = 0.1 if any(k in type_ for k in ("MoveBase", "NavigateToPose")) else 0.0
+        found["navigate"].append(Candidate(name, type_, "action", round(0.6 + score + bonus, 4), how))
+    return found
+
+
+def identify(
+    graph: Graph, vocab: Vocabulary | None = None, user_choices: dict[str, str] | None = None
+) -> dict[str, Result]:
+    """Bind every action of one robot; keep a person's choice while its target still exists."""
+    vocab = vocab or Vocabulary()
+    found = candidates(graph, vocab)
+    results = {}
+    for action in ACTIONS:
+        ranked = sorted(found[action], key=lambda c: (-c.score, c.target))
+        kept = [asdict(c) for c in ranked[:10]]
+        choice = (user_choices or {}).get(action)
+        if choice and (target := _lookup(graph, choice)):
+            kind, type_ = target
+            results[action] = Result(action, choice, kind, type_, "user", 1.0, False, kept)
+        elif not ranked:
+            results[action] = Result(action, needs_user=action in ESSENTIAL)
+        elif len(ranked) > 1 and ranked[0].score - ranked[1].score < TIE:
+            results[action] = Result(action, how="none", needs_user=True, candidates=kept)
+        else:
+            best = ranked[0]
+            conf = round(min(1.0, best.score), 2)
+            results[action] = Result(action, best.target, best.kind, best.type, best.how, conf, False, kept)
+    return results
+
+
+def _lookup(graph: Graph, target: str) -> tuple[str, str] | None:
+    if target in graph.topics:
+        return "topic", graph.topics[target].type
+    if target in graph.actions:
+        return "action", graph.actions[target]
+    if target in graph.services:
+        return "service", graph.services[target]
+    return None

@@ -1,0 +1,23 @@
+"""rosbridge v2 client (asyncio, `websockets`) with roslibpy's wire format; no Django here."""
+
+from robots.rosbridge.client import ActionGoal, RosbridgeClient, Subscription
+from robots.rosbridge.errors import (
+    LinkDown,
+    NotRosbridgeError,
+    RosbridgeError,
+    RosbridgeTimeout,
+    ServiceError,
+    UnreachableError,
+)
+
+__all__ = [
+    "ActionGoal",
+    "LinkDown",
+    "NotRosbridgeError",
+    "RosbridgeClient",
+    "RosbridgeError",
+    "RosbridgeTimeout",
+    "ServiceError",
+    "Subscription",
+    "UnreachableError",
+]

@@ -1,0 +1,376 @@
+"""An asyncio rosbridge v2 client on `websockets`.
+
+Why not roslibpy: its default transport runs Twisted's reactor in a thread, started once per process; on
+Twisted `terminate()` is final, so a long-lived worker that must drop and re-open links cannot use it, and a
+process that imported daphne is already tied to Twisted (stack-notes: "roslibpy transports"). The link
+process, the registration engine and the execution engine each hold many endpoints in one process; here each
+endpoint is one coroutine-driven connection on the caller's event loop: no reactor, no thread per endpoint,
+and reconnection (exponential backoff, re-subscribe, re-advertise) is ours to control and test. The wire
+format is roslibpy's (robots/rosbridge/codec.py, checked against roslibpy in tests/robots/test_wire_format.py).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
+
+from robots.rosbridge import codec
+from robots.rosbridge.errors import (
+    LinkDown,
+    NotRosbridgeError,
+    RosbridgeError,
+    RosbridgeTimeout,
+    ServiceError,
+    UnreachableError,
+)
+
+log = logging.getLogger("robots.rosbridge")
+
+
+@dataclass(eq=False)
+class Subscription:
+    """A handle returned by subscribe(); pass it to unsubscribe()."""
+
+    topic: str
+    type: str
+    callback: Callable[[dict], None]
+    message: dict
+
+    @property
+    def id(self) -> str:
+        return self.message["id"]
+
+
+@dataclass(eq=False)
+class ActionGoal:
+    """A ROS 2 action goal in flight: `await goal.wait()` gives {"status", "values"}."""
+
+    id: str
+    action: str
+    result: asyncio.Future
+    on_feedback: Callable[[dict], None] | None = None
+    feedback: list = field(default_factory=list)
+
+    async def wait(self, timeout: float | None = None) -> dict:
+        try:
+            return await asyncio.wait_for(asyncio.shield(self.result), timeout)
+        except TimeoutError:
+            raise RosbridgeTimeout(f"{self.action}: no action result within {timeout:g} s") from None
+
+
+class RosbridgeClient:
+    """One rosbridge connection: service calls, topics, ROS 2 actions, optional reconnection."""
+
+    def __init__(
+        self,
+        url: str,
+        connect_timeout: float = 2.0,
+        call_timeout: float = 3.0,
+        reconnect: bool = False,
+        ping_interval: float | None = 5.0,
+        min_backoff: float = 0.1,
+        max_backoff: float = 1.6,
+    ) -> None:
+        self.url = url
+        self.connect_timeout, self.call_timeout = connect_timeout, call_timeout
+        self.reconnect, self.ping_interval = reconnect, ping_interval
+        self.min_backoff, self.max_backoff = min_backoff, max_backoff
+        self.last_error = ""
+        self._ws: ClientConnection | None = None
+        self._ids = codec.Ids()
+        self._calls: dict[str, asyncio.Future] = {}
+        self._goals: dict[str, ActionGoal] = {}
+        self._topics: dict[str, list[Subscription]] = {}
+        self._adverts: dict[str, dict] = {}
+        self._fragments = codec.Fragments()
+        self._link_callbacks: list[Callable[[bool, str], None]] = []
+        self._up: bool | None = None
+        self._garbage: NotRosbridgeError | None = None
+        self._reader: asyncio.Task | None = None
+        self._supervisor: asyncio.Task | None = None
+        self._closing = False
+        self._handlers = {
+            "publish": self._on_publish,
+            "service_response": self._on_service_response,
+            "action_feedback": self._on_action_feedback,
+            "action_result": self._on_action_result,
+            "fragment": self._on_fragment,
+        }
+
+    # ----- connection -----
+    @property
+    def is_connected(self) -> bool:
+        return self._ws is not None
+
+    def on_link(self, callback: Callable[[bool, str], None]) -> None:
+        """Call callback(up, reason) whenever the link goes up or down."""
+        self._link_callbacks.append(callback)
+
+    async def connect(self) -> None:
+        """Open the WebSocket once; raise a RosbridgeError with a one-line reason."""
+        ws = await self._open()
+        self._ws, self._garbage = ws, None
+        self._reader = asyncio.create_task(self._read(ws))
+        for message in [
+            *self._adverts.values(),
+            *(s.message for subs in self._topics.values() for s in subs),
+        ]:
+            await self._send(message)
+        self._set_link(True, "connected")
+
+    async def start(self) -> None:
+        """Keep the link up in the background: connect, and reconnect with backoff after every drop."""
+        self.reconnect = True
+        if self._supervisor is None:
+            self._supervisor = asyncio.create_task(self._supervise())
+
+    async def wait_connected(self, timeout: float) -> bool:
+        """Wait until the link is up (for start()ed clients); False on timeout."""
+        deadline = asyncio.get_running_loop().time() + timeout
+        while self._ws is None and asyncio.get_running_loop().time() < deadline:
+            await asyncio.sleep(0.02)
+        return self._ws is not None
+
+    async def close(self) -> None:
+        """Close for good: stop reconnecting, fail whatever waits."""
+        self._closing = True
+        if self._supervisor is not None:
+            self._supervisor.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._supervisor
+        ws, self._ws = self._ws, None
+        if ws is not None:
+            await ws.close()
+        if self._reader is not None:
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._reader
+        self._fail_waiting(LinkDown(f"{self.url}: closed"))
+
+    async def __aenter__(self) -> RosbridgeClient:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc) -> None:
+        await self.close()
+
+    async def _open(self) -> ClientConnection:
+        try:
+            return await connect(
+                self.url,
+                open_timeout=self.connect_timeout,
+                compression=None,
+                proxy=None,
+                max_size=None,
+                max_queue=None,
+                ping_interval=self.ping_interval,
+                ping_timeout=self.ping_interval,
+                close_timeout=1.0,
+            )
+        except InvalidURI:
+            raise RosbridgeError(f"{self.url}: not a WebSocket URL (expected ws://host:port)") from None
+        except InvalidStatus as exc:
+            status = exc.response.status_code
+            raise NotRosbridgeError(
+                f"{self.url}: not a rosbridge server (HTTP {status}, no WebSocket)"
+            ) from None
+        except InvalidHandshake as exc:
+            raise NotRosbridgeError(f"{self.url}: not a rosbridge server ({exc})") from None
+        except TimeoutError:
+            raise RosbridgeTimeout(
+                f"{self.url}: no WebSocket handshake within {self.connect_timeout:g} s"
+            ) from None
+        except OSError as exc:
+            raise UnreachableError(f"{self.url}: unreachable ({exc.strerror or exc})") from None
+
+    async def _supervise(self) -> None:
+        delay = self.min_backoff
+        while not self._closing:
+            try:
+                await self.connect()
+            except RosbridgeError as exc:
+                self.last_error = str(exc)
+                self._set_link(False, str(exc))
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, self.max_backoff)
+                continue
+            delay = self.min_backoff
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._reader
+
+    async def _read(self, ws: ClientConnection) -> None:
+        reason = "connection closed"
+        try:
+            async for raw in ws:
+                self._dispatch(raw)
+        except ConnectionClosed as exc:
+            reason = f"connection lost ({exc.rcvd.code if exc.rcvd else 'no close frame'})"
+        finally:
+            if self._ws is ws:
+                self._ws = None
+            self._fail_waiting(LinkDown(f"{self.url}: {reason}"))
+            if not self._closing:
+                self._set_link(False, reason)
+
+    def _set_link(self, up: bool, reason: str) -> None:
+        if self._up == up:
+            return
+        self._up = up
+        for callback in list(self._link_callbacks):
+            try:
+                callback(up, reason)
+            except Exception:
+                log.exception("%s: link callback failed", self.url)
+
+    def _fail_waiting(self, error: RosbridgeError) -> None:
+        for fut in [*self._calls.values(), *(g.result for g in self._goals.values())]:
+            if not fut.done():
+                fut.set_exception(error)
+        self._goals.clear()
+
+    # ----- incoming -----
+    def _dispatch(self, raw: str | bytes) -> None:
+        try:
+            message = codec.decode(raw)
+        except NotRosbridgeError as exc:
+            self._garbage = NotRosbridgeError(f"{self.url}: not a rosbridge server ({exc})")
+            self._fail_waiting(self._garbage)
+            return
+        handler = self._handlers.get(message["op"])
+        if handler is not None:
+            handler(message)
+
+    def _on_publish(self, message: dict) -> None:
+        for sub in self._topics.get(message.get("topic"), ()):
+            try:
+                sub.callback(message.get("msg", {}))
+            except Exception:
+                log.exception("%s: callback for %s failed", self.url, sub.topic)
+
+    def _on_service_response(self, message: dict) -> None:
+        fut = self._calls.get(message.get("id"))
+        if fut is None or fut.done():
+            return
+        values = message.get("values")
+        if message.get("result") is False:
+            fut.set_exception(ServiceError(str(values)))
+        else:
+            fut.set_result(values if isinstance(values, dict) else {})
+
+    def _on_action_feedback(self, message: dict) -> None:
+        goal = self._goals.get(message.get("id"))
+        if goal is not None and goal.on_feedback is not None:
+            goal.on_feedback(message.get("values", {}))
+
+    def _on_action_result(self, message: dict) -> None:
+        goal = self._goals.pop(message.get("id"), None)
+        if goal is None or goal.result.done():
+            return
+        if message.get("result") is False:
+            goal.result.set_exception(ServiceError(str(message.get("values"))))
+        else:
+            goal.result.set_result({"status": message.get("status"), "values": message.get("values", {})})
+
+    def _on_fragment(self, message: dict) -> None:
+        try:
+            whole = self._fragments.add(message)
+        except NotRosbridgeError:
+            return
+        if whole is not None:
+            self._dispatch(codec.encode(whole))
+
+    # ----- outgoing -----
+    async def _send(self, message: dict) -> None:
+        if self._garbage is not None:
+            raise self._garbage
+        ws = self._ws
+        if ws is None:
+            raise LinkDown(f"{self.url}: not connected")
+        try:
+            await ws.send(codec.encode(message))
+        except ConnectionClosed:
+            raise LinkDown(f"{self.url}: connection lost") from None
+
+    async def call_service(self, name: str, args: dict | None = None, timeout: float | None = None) -> dict:
+        """Call a service; ServiceError with the server's text on failure, RosbridgeTimeout if silent."""
+        message = codec.call_service(self._ids, name, args)
+        fut = asyncio.get_running_loop().create_future()
+        self._calls[message["id"]] = fut
+        limit = self.call_timeout if timeout is None else timeout
+        try:
+            await self._send(message)
+            return await asyncio.wait_for(fut, limit)
+        except TimeoutError as exc:
+            if isinstance(exc, RosbridgeError):
+                raise
+            raise RosbridgeTimeout(f"{self.url}: no answer to {name} within {limit:g} s") from None
+        finally:
+            self._calls.pop(message["id"], None)
+
+    async def subscribe(
+        self,
+        topic: str,
+        type_: str,
+        callback: Callable[[dict], None],
+        throttle_rate: int = 0,
+        queue_length: int = 0,
+    ) -> Subscription:
+        """Subscribe; the subscription is renewed after every reconnection."""
+        sub = Subscription(
+            topic, type_, callback, codec.subscribe(self._ids, topic, type_, throttle_rate, queue_length)
+        )
+        self._topics.setdefault(topic, []).append(sub)
+        if self._ws is not None or not self.reconnect:
+            await self._send(sub.message)
+        return sub
+
+    async def unsubscribe(self, sub: Subscription) -> None:
+        subs = self._topics.get(sub.topic, [])
+        if sub in subs:
+            subs.remove(sub)
+            if not subs:
+                self._topics.pop(sub.topic, None)
+            if self._ws is not None:
+                await self._send(codec.unsubscribe(sub.id, sub.topic))
+
+    async def advertise(self, topic: str, type_: str, latch: bool = False, queue_size: int = 100) -> None:
+        """Advertise once per topic; re-advertised after every reconnection."""
+        if topic in self._adverts:
+            return
+        message = codec.advertise(self._ids, topic, type_, latch, queue_size)
+        self._adverts[topic] = message
+        if self._ws is not None or not self.reconnect:
+            await self._send(message)
+
+    async def unadvertise(self, topic: str) -> None:
+        message = self._adverts.pop(topic, None)
+        if message is not None and self._ws is not None:
+            await self._send(codec.unadvertise(message["id"], topic))
+
+    async def publish(self, topic: str, msg: dict, type_: str | None = None) -> None:
+        """Publish; with a type the topic is advertised first (once), as roslibpy does."""
+        if type_ is not None and topic not in self._adverts:
+            await self.advertise(topic, type_)
+        await self._send(codec.publish(self._ids, topic, msg))
+
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: dict, on_feedback: Callable[[dict], None] | None = None
+    ) -> ActionGoal:
+        """Send a ROS 2 action goal (rosbridge ros2 branch); await .wait() for its result."""
+        message = codec.send_action_goal(self._ids, action, action_type, goal, feedback=True)
+        handle = ActionGoal(message["id"], action, asyncio.get_running_loop().create_future(), on_feedback)
+        self._goals[handle.id] = handle
+        try:
+            await self._send(message)
+        except RosbridgeError:
+            self._goals.pop(handle.id, None)
+            raise
+        return handle
+
+    async def cancel_action_goal(self, goal: ActionGoal) -> None:
+        await self._send(codec.cancel_action_goal(goal.id, goal.action))

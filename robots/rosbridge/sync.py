@@ -1,0 +1,91 @@
+"""Use rosbridge links from synchronous code (Django views, Celery tasks): one event-loop thread per process.
+
+`get_client(url)` returns a thread-safe SyncClient whose RosbridgeClient lives on that loop and keeps its
+link up (reconnecting after restarts). The loop and the clients are keyed by process id, so a Celery worker
+forked after the parent used a link starts its own (stack-notes: don't connect before the fork).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import threading
+from collections.abc import Callable
+from functools import cache
+
+from robots.rosbridge.client import RosbridgeClient, Subscription
+from robots.rosbridge.errors import LinkDown
+
+
+class LoopThread:
+    """An asyncio loop running forever in a daemon thread."""
+
+    def __init__(self) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_forever, name="rosbridge-loop", daemon=True)
+        self.thread.start()
+
+    def run(self, coro, timeout: float | None = None):
+        """Run a coroutine on the loop and wait for its result."""
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+
+class SyncClient:
+    """Blocking wrappers over one RosbridgeClient; safe to call from any thread."""
+
+    def __init__(self, runner: LoopThread, url: str, connect_timeout: float = 2.0) -> None:
+        self.runner, self.url = runner, url
+        self.client = RosbridgeClient(url, reconnect=True, ping_interval=2.0)
+        runner.run(self.client.start())
+        runner.run(self.client.wait_connected(connect_timeout))
+
+    def _run(self, coro, timeout: float | None = None):
+        return self.runner.run(coro, timeout)
+
+    def ensure_connected(self, timeout: float = 2.0) -> None:
+        if not self._run(self.client.wait_connected(timeout)):
+            raise LinkDown(f"{self.url}: not connected ({self.client.last_error or 'connecting'})")
+
+    def call_service(self, name: str, args: dict | None = None, timeout: float | None = None) -> dict:
+        self.ensure_connected()
+        return self._run(self.client.call_service(name, args, timeout))
+
+    def publish(self, topic: str, msg: dict, type_: str | None = None) -> None:
+        self._run(self.client.publish(topic, msg, type_))
+
+    def advertise(self, topic: str, type_: str) -> None:
+        self._run(self.client.advertise(topic, type_))
+
+    def subscribe(self, topic: str, type_: str, callback: Callable[[dict], None], **options) -> Subscription:
+        """Subscribe; callback runs on the loop thread, so keep it short and thread-safe."""
+        return self._run(self.client.subscribe(topic, type_, callback, **options))
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        self._run(self.client.unsubscribe(sub))
+
+    def send_action_goal(self, action: str, action_type: str, goal: dict, on_feedback=None):
+        return self._run(self.client.send_action_goal(action, action_type, goal, on_feedback))
+
+    def wait_action(self, goal, timeout: float | None = None) -> dict:
+        return self._run(goal.wait(timeout))
+
+    def cancel_action_goal(self, goal) -> None:
+        self._run(self.client.cancel_action_goal(goal))
+
+    def close(self) -> None:
+        self._run(self.client.close())
+
+
+@cache
+def _runner(pid: int) -> LoopThread:
+    return LoopThread()
+
+
+@cache
+def _client(pid: int, url: str) -> SyncClient:
+    return SyncClient(_runner(pid), url)
+
+
+def get_client(url: str) -> SyncClient:
+    """Return this process's shared SyncClient for url (created and connected on first use)."""
+    return _client(os.getpid(), url)
