@@ -1,0 +1,31 @@
+"""Read the shared acceptance table of instructions."""
+
+import csv
+from pathlib import Path
+
+TSV = Path(__file__).resolve().parents[3] / "shared" / "acceptance" / "instructions.tsv"
+COLUMNS = ["text", "type", "needs_user", "action", "robots", "destination", "task", "steps"]
+
+
+def rows() -> list[dict]:
+    lines = [
+        line for line in TSV.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")
+    ]
+    reader = csv.DictReader(lines, delimiter="\t")
+    assert reader.fieldnames == COLUMNS, reader.fieldnames
+    return list(reader)
+
+
+def summary(result: dict) -> dict:
+    """Put an interpreter result in the table's columns."""
+    first = result["steps"][0] if result["steps"] else {}
+    robots = first.get("robots", "all")
+    return {
+        "type": result["type"],
+        "needs_user": "yes" if result["needs_user"] else "no",
+        "action": first.get("action") or "-",
+        "robots": robots if robots == "all" else ",".join(robots),
+        "destination": (first.get("destination") or {}).get("name", "-"),
+        "task": first.get("task") or "-",
+        "steps": str(len(result["steps"])),
+    }
