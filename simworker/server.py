@@ -26,7 +26,7 @@ log = logging.getLogger("simworker.server")
 
 MAX_MESSAGE_SIZE = 10_000_000  # rosbridge's max_message_size; bigger frames close the connection (1009)
 SEND_QUEUE = 1000  # messages waiting for one client; older ones are dropped beyond this
-STALL_SECONDS = 5.0  # a client whose queue stays full this long without draining is disconnected
+STALL_SECONDS = 5.0  # a client that accepts no data for this long is disconnected
 FLOOD_RATE = 2000.0  # incoming messages per second per client before the excess is dropped
 BRIDGE_NODE = "/rosbridge_websocket"
 
@@ -62,12 +62,11 @@ class Client:
         self.subs: dict[str, Subscription] = {}
         self.adverts: dict[str, set] = {}
         self.dropped = 0
-        self.full_since: float | None = None
         self.tokens, self.token_time = FLOOD_RATE, time.monotonic()
         self.connected_at = time.time()
 
     def send(self, text: str, sub: Subscription | None = None) -> None:
-        """Queue a frame; drop the oldest when full and cut off a client that stays stalled."""
+        """Queue a frame for the writer; drop the oldest when the queue is full."""
         if sub is not None:
             if sub.ids and (throttle := sub.throttle) and time.monotonic() - sub.last_sent < throttle:
                 return
@@ -81,11 +80,6 @@ class Client:
             if old_sub is not None:
                 old_sub.queued -= 1
             self.dropped += 1
-            now = time.monotonic()
-            self.full_since = self.full_since or now
-            if now - self.full_since > STALL_SECONDS:
-                log.warning("client %s stopped reading; closing", self.ws.remote_address)
-                self.ws.transport.abort()
         self.queue.append((text, sub))
         self.wake.set()
 
@@ -109,8 +103,13 @@ class Client:
             text, sub = self.queue.popleft()
             if sub is not None:
                 sub.queued -= 1
-            await self.ws.send(text)
-            self.full_since = None
+            try:
+                async with asyncio.timeout(STALL_SECONDS):
+                    await self.ws.send(text)
+            except TimeoutError:
+                log.warning("client %s stopped reading; closing its connection", self.ws.remote_address)
+                self.ws.transport.abort()
+                return
 
 
 class RosbridgeServer:
@@ -157,6 +156,9 @@ class RosbridgeServer:
         self._client_topics()
 
     async def stop(self) -> None:
+        """Close the listener and drop every connection at once (no waiting on stalled clients)."""
+        for client in list(self.clients):
+            client.ws.transport.abort()
         if self._server is not None:
             self._server.close()
             await self._server.wait_closed()
