@@ -185,5 +185,3 @@ def load_terms() -> Terms:
     models_ = sorted(set(Robot.objects.exclude(model="").values_list("model", "drive")))
     return Terms(actions, classes, concepts, synonyms, keywords, models_)
 
-
-from interpreter import signals  # noqa: E402, F401 - connects the version bumps
