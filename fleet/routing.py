@@ -1,3 +1,10 @@
 """WebSocket routes: one socket per page."""
 
-websocket_urlpatterns = []
+from django.urls import path
+
+from fleet import consumers
+
+websocket_urlpatterns = [
+    path("ws/fleet/", consumers.FleetConsumer.as_asgi()),
+    path("ws/robots/<int:robot_id>/", consumers.RobotConsumer.as_asgi()),
+]

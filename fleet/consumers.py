@@ -1,0 +1,183 @@
+"""WebSockets: one per page. Authenticate by the session, join groups, send the snapshot, then forward deltas.
+
+Close codes: 4401 not logged in, 4403 not allowed to view, 4404 no such robot.
+Commands from the browser (stop, teleop) are checked here against the user's role and the robot's lease
+exactly as the pages' POST views check them (both call ``run_command``).
+"""
+
+import math
+
+from channels.db import database_sync_to_async
+from channels.generic.websocket import AsyncJsonWebsocketConsumer
+
+from fleet import live
+
+VIEW_PERM = "robots.view_robot"
+
+
+class CommandError(Exception):
+    """A command that is refused or malformed; the message says why, in words."""
+
+
+def _robots_for(user, ids) -> list:
+    """The robots named by ids ("all" or a list of primary keys), each one the user may command."""
+    from fleet.leases import ControlRefused, check_command
+    from robots.models import Robot
+
+    robots = Robot.objects.all() if ids == "all" else Robot.objects.filter(pk__in=_int_list(ids))
+    allowed, refused = [], []
+    for robot in robots:
+        try:
+            check_command(user, robot)
+        except ControlRefused as exc:
+            refused.append(str(exc))
+        else:
+            allowed.append(robot)
+    return allowed, refused
+
+
+def _int_list(ids) -> list[int]:
+    if not isinstance(ids, list) or not all(isinstance(pk, int) for pk in ids):
+        raise CommandError('robots: give "all" or a list of robot ids')
+    return ids
+
+
+def _number(content: dict, field: str) -> float:
+    value = content.get(field, 0.0)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise CommandError(f"{field}: must be a number")
+    return float(value)
+
+
+def _control():
+    try:
+        from fleet import control
+    except ImportError as exc:
+        raise CommandError("robot control is not available on this server yet") from exc
+    return control
+
+
+def command_stop(user, content: dict) -> str:
+    """Stop the robots named (or all): every one the user may command; say which were not."""
+    from fleet.roles import can_control
+
+    if not can_control(user):
+        raise CommandError(f"{user.username} may only view robots, not command them.")
+    robots, refused = _robots_for(user, content.get("robots", "all"))
+    if robots:
+        _control().stop(robots, user)
+    stopped = ", ".join(robot.name for robot in robots) or "no robot"
+    return f"Stopped {stopped}." + ("".join(f" {reason}" for reason in refused))
+
+
+def command_teleop(user, content: dict) -> str:
+    """Drive one robot at (linear, angular), clamped to its limits, if the user may command it."""
+    from fleet.leases import ControlRefused, check_command
+    from robots.models import Robot
+
+    robot = (
+        Robot.objects.filter(pk=content.get("robot")).first()
+        if isinstance(content.get("robot"), int)
+        else None
+    )
+    if robot is None:
+        raise CommandError("robot: no such robot")
+    linear = max(-robot.max_linear, min(robot.max_linear, _number(content, "linear")))
+    angular = max(-robot.max_angular, min(robot.max_angular, _number(content, "angular")))
+    try:
+        check_command(user, robot)
+    except ControlRefused as exc:
+        raise CommandError(str(exc)) from exc
+    _control().teleop(robot, user, linear, angular)
+    return f"{robot.name}: linear {linear:.2f} m/s, angular {angular:.2f} rad/s"
+
+
+COMMANDS = {"stop": command_stop, "teleop": command_teleop}
+
+
+def run_command(user, content) -> dict:
+    """Run one browser command; the reply says whether it was done and why not."""
+    name = content.get("command") if isinstance(content, dict) else None
+    handler = COMMANDS.get(name)
+    reply = {"type": "command.result", "command": name, "ref": content.get("ref") if name else None}
+    if handler is None:
+        return {**reply, "ok": False, "detail": f"command: unknown, expected one of {sorted(COMMANDS)}"}
+    try:
+        detail = handler(user, content)
+    except CommandError as exc:
+        from fleet import audit
+
+        audit.record(user, "command.refused", name, reason=str(exc))
+        return {**reply, "ok": False, "detail": str(exc)}
+    return {**reply, "ok": True, "detail": detail}
+
+
+class _PageConsumer(AsyncJsonWebsocketConsumer):
+    """Authenticate, join the page's groups, send the snapshot first, then forward every delta."""
+
+    async def connect(self):
+        await self.accept()
+        user = self.scope.get("user")
+        if user is None or not user.is_authenticated:
+            await self.close(code=4401)
+            return
+        if not await database_sync_to_async(user.has_perm)(VIEW_PERM):
+            await self.close(code=4403)
+            return
+        snapshot = await database_sync_to_async(self.snapshot)()
+        if snapshot is None:
+            await self.close(code=4404)
+            return
+        self.joined = self.group_names()
+        for group in self.joined:
+            await self.channel_layer.group_add(group, self.channel_name)
+        await self.send_json(snapshot)
+
+    async def disconnect(self, code):
+        for group in getattr(self, "joined", ()):
+            await self.channel_layer.group_discard(group, self.channel_name)
+
+    async def receive_json(self, content, **kwargs):
+        user = self.scope["user"]
+        if not user.is_authenticated:
+            return
+        await self.send_json(await database_sync_to_async(run_command)(user, content))
+
+    async def forward(self, event):
+        await self.send_json(event)
+
+    # One handler per payload type of fleet.live; the name matches the message "type".
+    robot_status = robot_transition = instruction_update = lease_update = robot_goal = forward
+    registration_progress = forward
+
+
+class FleetConsumer(_PageConsumer):
+    """/ws/fleet/: every robot, every instruction, all poses."""
+
+    def group_names(self):
+        return [live.FLEET_GROUP, live.POSES_GROUP]
+
+    def snapshot(self):
+        return live.fleet_snapshot()
+
+    async def fleet_poses(self, event):
+        await self.send_json(event)
+
+
+class RobotConsumer(_PageConsumer):
+    """/ws/robots/<id>/: one robot's status, transitions, lease, goal and pose."""
+
+    def group_names(self):
+        return [live.robot_group(self.robot_id), live.POSES_GROUP]
+
+    def snapshot(self):
+        from robots.models import Robot
+
+        self.robot_id = self.scope["url_route"]["kwargs"]["robot_id"]
+        robot = Robot.objects.filter(pk=self.robot_id).first()
+        return live.robot_snapshot(robot) if robot else None
+
+    async def fleet_poses(self, event):
+        mine = [pose for pose in event["poses"] if pose["id"] == self.robot_id]
+        if mine:
+            await self.send_json({"type": "fleet.poses", "poses": mine})

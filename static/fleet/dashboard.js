@@ -1,0 +1,54 @@
+// The dashboard and the robot list: live table, live map, console; map clicks send the selected robots.
+import { toast } from "./api.js";
+import { Console } from "./console.js";
+import { connectLive } from "./live.js";
+import { FleetMap } from "./map.js";
+import { RobotTable } from "./robots_table.js";
+
+const table = new RobotTable(document.querySelector("#robot-table tbody"));
+const mapData = document.getElementById("map-data") ? JSON.parse(document.getElementById("map-data").textContent) : null;
+const canvas = document.getElementById("fleet-map");
+const console_ = new Console(document.getElementById("console-form"), document.getElementById("parse"), document.getElementById("progress") || document.createElement("ol"));
+
+function sendSelected(target) {
+  const robots = table.selected();
+  if (!robots.length) { toast("Select one or more robots in the table first.", true); return; }
+  const where = target.name ? target.name : `(${target.x}, ${target.y})`;
+  robots.forEach((robot) => console_.submit(`move ${robot.name} to ${where}`));
+}
+
+const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, sendSelected) : null;
+document.querySelectorAll("button.goto").forEach((button) => button.addEventListener("click", () => sendSelected({ name: button.dataset.location })));
+
+connectLive("/ws/fleet/", {
+  snapshot(message) {
+    table.load(message.robots);
+    if (map) map.setRobots(message.robots);
+  },
+  "robot.status"(message) {
+    const changes = { state: message.state, link_status: message.link_status };
+    if (!table.update(message.id, changes)) table.load([...table.robots.values(), { id: message.id, name: message.robot, ...changes }]);
+    if (map) map.update(message.id, changes);
+  },
+  "robot.transition"(message) {
+    table.update(message.id, { state: message.to_state });
+    if (map) map.update(message.id, { state: message.to_state });
+    console_.transition(message);
+  },
+  "robot.goal"(message) {
+    const goal = message.x == null ? null : { name: message.name, x: message.x, y: message.y };
+    if (map) map.update(message.id, { goal });
+  },
+  "lease.update"(message) { table.update(message.id, { holder: message.holder }); },
+  "instruction.update"(message) {
+    console_.instructionUpdate(message);
+    const done = ["succeeded", "failed", "cancelled", "refused"].includes(message.status);
+    table.robots.forEach((robot) => {
+      if (robot.instruction && robot.instruction.id === message.id && done) table.update(robot.id, { instruction: null });
+    });
+  },
+  "fleet.poses"(message) {
+    message.poses.forEach((pose) => { table.speed(pose.id, pose); if (map) map.pose(pose); });
+  },
+  "command.result"(message) { toast(message.detail, !message.ok); },
+});

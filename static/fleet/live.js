@@ -1,0 +1,45 @@
+// One WebSocket per page: the snapshot first, then deltas; reconnects by itself with backoff.
+
+export function connectLive(path, handlers) {
+  const conn = document.getElementById("conn");
+  let socket = null;
+  let delay = 500;
+  const pending = [];
+
+  function status(state, text) {
+    if (!conn) return;
+    conn.dataset.state = state;
+    conn.textContent = text;
+  }
+
+  function open() {
+    const scheme = location.protocol === "https:" ? "wss" : "ws";
+    socket = new WebSocket(`${scheme}://${location.host}${path}`);
+    socket.addEventListener("open", () => {
+      delay = 500;
+      status("live", "live");
+      while (pending.length) socket.send(pending.shift());
+    });
+    socket.addEventListener("message", (event) => {
+      const message = JSON.parse(event.data);
+      const handler = handlers[message.type];
+      if (handler) handler(message);
+    });
+    socket.addEventListener("close", (event) => {
+      if (event.code === 4401) { location.href = `/login/?next=${encodeURIComponent(location.pathname)}`; return; }
+      if (event.code === 4403 || event.code === 4404) { status("down", "not allowed"); return; }
+      status("down", `reconnecting in ${Math.round(delay / 100) / 10} s`);
+      setTimeout(open, delay);
+      delay = Math.min(delay * 2, 10000);
+    });
+  }
+
+  open();
+  return {
+    send(message) {
+      const text = JSON.stringify(message);
+      if (socket && socket.readyState === WebSocket.OPEN) socket.send(text);
+      else pending.push(text);
+    },
+  };
+}

@@ -1,0 +1,217 @@
+// The live map on a canvas: occupancy grid, locations, robots as oriented footprints with names, state glyphs,
+// trails and goals. Drawing is coalesced to one frame per animation tick, however many poses arrive.
+import { STATE_COLOR, STATE_GLYPH } from "./api.js";
+
+const TRAIL_POINTS = 120;
+const PICK_RADIUS_M = 0.4;
+
+export class FleetMap {
+  constructor(canvas, mapData, onPick) {
+    this.canvas = canvas;
+    this.map = mapData.map;
+    this.locations = mapData.locations || [];
+    this.onPick = onPick;
+    this.robots = new Map();
+    this.trails = new Map();
+    this.grid = this.renderGrid();
+    this.queued = false;
+    canvas.addEventListener("click", (event) => this.click(event));
+    new ResizeObserver(() => this.redraw()).observe(canvas);
+  }
+
+  renderGrid() {
+    const { width, height, cells } = this.map;
+    const image = document.createElement("canvas");
+    image.width = width;
+    image.height = height;
+    const context = image.getContext("2d");
+    const pixels = context.createImageData(width, height);
+    const shade = { "#": [55, 71, 79], "?": [176, 190, 197], ".": [250, 250, 250] };
+    for (let row = 0; row < height; row += 1) {
+      for (let col = 0; col < width; col += 1) {
+        const [r, g, b] = shade[cells[row * width + col]] || shade["."];
+        const offset = ((height - 1 - row) * width + col) * 4; // ROS row 0 is the bottom
+        pixels.data.set([r, g, b, 255], offset);
+      }
+    }
+    context.putImageData(pixels, 0, 0);
+    return image;
+  }
+
+  layout() {
+    const ratio = window.devicePixelRatio || 1;
+    const box = this.canvas.getBoundingClientRect();
+    this.canvas.width = Math.round(box.width * ratio);
+    this.canvas.height = Math.round(box.height * ratio);
+    const worldW = this.map.width * this.map.resolution;
+    const worldH = this.map.height * this.map.resolution;
+    this.scale = Math.min(this.canvas.width / worldW, this.canvas.height / worldH);
+    this.offsetX = (this.canvas.width - worldW * this.scale) / 2;
+    this.offsetY = (this.canvas.height - worldH * this.scale) / 2;
+    this.ratio = ratio;
+  }
+
+  toScreen(x, y) {
+    const [ox, oy] = this.map.origin;
+    const worldH = this.map.height * this.map.resolution;
+    return [this.offsetX + (x - ox) * this.scale, this.offsetY + (worldH - (y - oy)) * this.scale];
+  }
+
+  toWorld(px, py) {
+    const [ox, oy] = this.map.origin;
+    const worldH = this.map.height * this.map.resolution;
+    return [(px - this.offsetX) / this.scale + ox, worldH - (py - this.offsetY) / this.scale + oy];
+  }
+
+  click(event) {
+    const box = this.canvas.getBoundingClientRect();
+    const [x, y] = this.toWorld((event.clientX - box.left) * this.ratio, (event.clientY - box.top) * this.ratio);
+    const near = this.locations.find((spot) => Math.hypot(spot.x - x, spot.y - y) < PICK_RADIUS_M);
+    this.onPick(near ? { name: near.name } : { x: Math.round(x * 10) / 10, y: Math.round(y * 10) / 10 });
+  }
+
+  setRobots(rows) {
+    this.robots = new Map(rows.map((robot) => [robot.id, { ...robot }]));
+    this.redraw();
+  }
+
+  update(id, changes) {
+    const robot = this.robots.get(id);
+    if (robot) Object.assign(robot, changes);
+    this.redraw();
+  }
+
+  pose(pose) {
+    const robot = this.robots.get(pose.id);
+    if (!robot) return;
+    robot.pose = pose;
+    const trail = this.trails.get(pose.id) || [];
+    const last = trail[trail.length - 1];
+    if (!last || Math.hypot(last[0] - pose.x, last[1] - pose.y) > 0.03) trail.push([pose.x, pose.y]);
+    if (trail.length > TRAIL_POINTS) trail.shift();
+    this.trails.set(pose.id, trail);
+    this.redraw();
+  }
+
+  where(robot) {
+    if (robot.pose) return [robot.pose.x, robot.pose.y, robot.pose.yaw];
+    if (robot.start_pose && robot.start_pose.length >= 2) return [robot.start_pose[0], robot.start_pose[1], robot.start_pose[2] || 0];
+    return null;
+  }
+
+  redraw() {
+    if (this.queued) return;
+    this.queued = true;
+    requestAnimationFrame(() => { this.queued = false; this.draw(); });
+  }
+
+  draw() {
+    this.layout();
+    const context = this.canvas.getContext("2d");
+    context.imageSmoothingEnabled = false;
+    context.fillStyle = "#cfd8dc";
+    context.fillRect(0, 0, this.canvas.width, this.canvas.height);
+    const [gx, gy] = this.toScreen(this.map.origin[0], this.map.origin[1] + this.map.height * this.map.resolution);
+    context.drawImage(this.grid, gx, gy, this.map.width * this.map.resolution * this.scale, this.map.height * this.map.resolution * this.scale);
+    this.locations.forEach((spot) => this.drawLocation(context, spot));
+    this.robots.forEach((robot) => this.drawTrail(context, robot));
+    this.robots.forEach((robot) => this.drawGoal(context, robot));
+    this.robots.forEach((robot) => this.drawRobot(context, robot));
+  }
+
+  font(size, weight = 600) { return `${weight} ${Math.round(size * this.ratio)}px system-ui, sans-serif`; }
+
+  drawLocation(context, spot) {
+    const [x, y] = this.toScreen(spot.x, spot.y);
+    const r = 5 * this.ratio;
+    context.fillStyle = spot.kind === "room" ? "#00897b" : "#f9a825";
+    context.strokeStyle = "#263238";
+    context.lineWidth = 1.5 * this.ratio;
+    context.beginPath();
+    context.moveTo(x, y - r); context.lineTo(x + r, y); context.lineTo(x, y + r); context.lineTo(x - r, y); context.closePath();
+    context.fill(); context.stroke();
+    context.font = this.font(12, 700);
+    context.fillStyle = "#263238";
+    context.fillText(spot.name, x + r + 2 * this.ratio, y - r);
+  }
+
+  drawTrail(context, robot) {
+    const trail = this.trails.get(robot.id);
+    if (!trail || trail.length < 2) return;
+    context.strokeStyle = STATE_COLOR[robot.state] || "#546e7a";
+    context.globalAlpha = 0.55;
+    context.lineWidth = 2 * this.ratio;
+    context.setLineDash([3 * this.ratio, 3 * this.ratio]);
+    context.beginPath();
+    trail.forEach(([x, y], index) => {
+      const [px, py] = this.toScreen(x, y);
+      if (index) context.lineTo(px, py); else context.moveTo(px, py);
+    });
+    context.stroke();
+    context.setLineDash([]);
+    context.globalAlpha = 1;
+  }
+
+  drawGoal(context, robot) {
+    if (!robot.goal || robot.goal.x == null) return;
+    const [x, y] = this.toScreen(robot.goal.x, robot.goal.y);
+    const r = 9 * this.ratio;
+    context.strokeStyle = "#c62828";
+    context.lineWidth = 2 * this.ratio;
+    context.beginPath();
+    context.arc(x, y, r, 0, Math.PI * 2);
+    context.moveTo(x - r * 1.4, y); context.lineTo(x + r * 1.4, y);
+    context.moveTo(x, y - r * 1.4); context.lineTo(x, y + r * 1.4);
+    context.stroke();
+    const at = this.where(robot);
+    if (at) {
+      const [rx, ry] = this.toScreen(at[0], at[1]);
+      context.setLineDash([6 * this.ratio, 4 * this.ratio]);
+      context.beginPath(); context.moveTo(rx, ry); context.lineTo(x, y); context.stroke();
+      context.setLineDash([]);
+    }
+  }
+
+  drawRobot(context, robot) {
+    const at = this.where(robot);
+    if (!at) return;
+    const [x, y, yaw] = at;
+    const color = STATE_COLOR[robot.state] || "#546e7a";
+    const footprint = robot.footprint && robot.footprint.length >= 3
+      ? robot.footprint : [[0.2, 0], [-0.15, 0.15], [-0.15, -0.15]];
+    const minimum = 0.18; // draw small robots at least this big (metres) so they stay visible
+    const size = Math.max(...footprint.map(([fx, fy]) => Math.hypot(fx, fy)));
+    const grow = size < minimum ? minimum / size : 1;
+    context.save();
+    context.beginPath();
+    footprint.forEach(([fx, fy], index) => {
+      const wx = x + grow * (fx * Math.cos(yaw) - fy * Math.sin(yaw));
+      const wy = y + grow * (fx * Math.sin(yaw) + fy * Math.cos(yaw));
+      const [px, py] = this.toScreen(wx, wy);
+      if (index) context.lineTo(px, py); else context.moveTo(px, py);
+    });
+    context.closePath();
+    context.fillStyle = color;
+    context.globalAlpha = robot.link_status === "offline" ? 0.45 : 0.9;
+    context.fill();
+    context.globalAlpha = 1;
+    context.lineWidth = 2 * this.ratio;
+    context.strokeStyle = "#111";
+    if (robot.link_status === "offline") context.setLineDash([4 * this.ratio, 3 * this.ratio]);
+    context.stroke();
+    context.setLineDash([]);
+    // heading: a line from the centre to the front
+    const [cx, cy] = this.toScreen(x, y);
+    const [hx, hy] = this.toScreen(x + Math.cos(yaw) * size * grow * 1.3, y + Math.sin(yaw) * size * grow * 1.3);
+    context.beginPath(); context.moveTo(cx, cy); context.lineTo(hx, hy); context.stroke();
+    const label = `${STATE_GLYPH[robot.state] || "•"} ${robot.name}`;
+    context.font = this.font(12, 700);
+    const width = context.measureText(label).width;
+    const top = cy - size * grow * this.scale - 20 * this.ratio;
+    context.fillStyle = "rgba(255,255,255,.88)";
+    context.fillRect(cx - width / 2 - 3 * this.ratio, top, width + 6 * this.ratio, 16 * this.ratio);
+    context.fillStyle = "#111";
+    context.fillText(label, cx - width / 2, top + 12 * this.ratio);
+    context.restore();
+  }
+}
