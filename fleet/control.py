@@ -1,0 +1,95 @@
+"""Direct control: stop and teleoperation, published from the calling process, bypassing every queue.
+
+stop() raises the robots' stop flags (running executions see them on their next control tick), publishes a
+zero velocity on each robot's move topic at once and cancels its ROS 1 navigation goal (ROS 2 goals are
+cancelled by their runner on its next tick), and cancels the robots' queued executions.
+"""
+
+from __future__ import annotations
+
+import logging
+from concurrent.futures import ThreadPoolExecutor
+
+from django.utils import timezone
+
+from fleet import audit, motion
+from fleet.execution import coordination
+from fleet.execution.link import LinkError, client_for, publish_zero
+from fleet.execution.runner import settle
+from fleet.leases import ControlRefused, check_command
+from fleet.models import Execution
+from robots.models import Robot
+
+log = logging.getLogger(__name__)
+
+WAITING = (Execution.Status.QUEUED, Execution.Status.PREEMPTED)
+
+
+def _robots(robots) -> list[Robot]:
+    """Robots from robots, names or primary keys."""
+    robots = list(robots)
+    if robots and all(isinstance(r, Robot) for r in robots):
+        return robots
+    names = [r for r in robots if isinstance(r, str)]
+    pks = [r for r in robots if isinstance(r, int)]
+    found = list(Robot.objects.filter(name__in=names)) + list(Robot.objects.filter(pk__in=pks))
+    missing = set(names) - {r.name for r in found}
+    if missing:
+        raise ValueError(f"No robot named {', '.join(sorted(missing))} is registered.")
+    return found
+
+
+def stop(robots, user, source: str = "console") -> dict[str, str]:
+    """Stop these robots now; return {robot name: "stopped" or the reason it could not be reached}."""
+    robots = _robots(robots)
+    if user is not None:
+        for robot in robots:
+            check_command(user, robot)
+    coordination.request_stop([robot.pk for robot in robots])
+    with ThreadPoolExecutor(max_workers=min(8, max(1, len(robots)))) as pool:
+        results = dict(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
+    cancel_waiting(robots, "stopped")
+    audit.record(user, "stop", ", ".join(r.name for r in robots)[:255], source=source, results=results)
+    return results
+
+
+def _publish_zero(robot: Robot) -> str:
+    try:
+        publish_zero(robot)
+    except (LinkError, Exception) as exc:  # one unreachable robot must not keep the others moving
+        log.warning("stop %s: %s", robot.name, exc)
+        return f"not reached: {exc}"
+    return "stopped"
+
+
+def cancel_waiting(robots, reason: str) -> int:
+    """Cancel the robots' queued (and preempted) executions and settle their instructions."""
+    rows = list(
+        Execution.objects.filter(robot__in=robots, status__in=WAITING).values_list("pk", "instruction_id")
+    )
+    done = Execution.objects.filter(pk__in=[pk for pk, _ in rows], status__in=WAITING).update(
+        status=Execution.Status.CANCELLED, finished_at=timezone.now(), error=reason
+    )
+    for instruction_id in {iid for _, iid in rows}:
+        settle(instruction_id)
+    return done
+
+
+def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
+    """Publish one velocity command within the robot's limits; return what was sent.
+
+    Refused (ControlRefused) while an instruction drives the robot: stop it first.
+    """
+    robot = _robots([robot])[0]
+    check_command(user, robot)
+    busy = Execution.objects.filter(robot=robot, status=Execution.Status.RUNNING).first()
+    if busy is not None:
+        raise ControlRefused(f"{robot.name} is running instruction #{busy.instruction_id}; stop it first.")
+    v, w = motion.clamp(float(linear), robot.max_linear), motion.clamp(float(angular), robot.max_angular)
+    move = robot.bindings.filter(action="move").exclude(target="").first()
+    if move is None:
+        raise LinkError(f"{robot.name}: no move topic is bound")
+    message = motion.velocity_message(v, w, move.message_type, robot.ros_version)
+    client_for(robot).publish(move.target, message, move.message_type or "geometry_msgs/Twist")
+    audit.record(user, "teleop", robot.name, linear=v, angular=w)
+    return v, w

@@ -1,0 +1,291 @@
+"""Motion without a navigation stack, and the ROS messages that carry commands (plain: no Django).
+
+The move-to-goal controller follows the paper's Figure 7: turn towards the goal, drive, correct the heading from
+odometry as it goes, and stop within a tolerance. Tasks: rotate(n) turns on the spot n times; clean drives a
+small coverage pattern around the location. A robot's map pose is its odometry composed with its start pose
+(or amcl_pose when the robot has one).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+# Speed words as a fraction of each robot's own limits.
+SPEED_FACTORS = {None: 0.6, "": 0.6, "slowly": 0.3, "fast": 0.85, "very fast": 1.0}
+TOLERANCE = 0.1  # metres: arrived when this close to the goal
+TURN_FIRST = 0.5  # rad: turn on the spot while the heading error is larger than this
+K_ANGULAR, K_LINEAR = 2.5, 1.2
+CLEAN_SIZE, CLEAN_LANES = 0.6, 3  # metres square, back-and-forth lanes
+
+
+@dataclass(frozen=True)
+class Limits:
+    """A robot's velocity limits (m/s, rad/s)."""
+
+    linear: float
+    angular: float
+
+    def __post_init__(self):
+        if not (self.linear > 0 and self.angular > 0):
+            raise ValueError(f"limits must be positive, got linear={self.linear}, angular={self.angular}")
+
+
+@dataclass(frozen=True)
+class Command:
+    """One velocity command; done means the controller has reached its goal (and the command is zero)."""
+
+    v: float
+    w: float
+    done: bool = False
+
+
+STOP = Command(0.0, 0.0, True)
+
+
+def speed_factor(word: str | None) -> float:
+    """The fraction of the limits a speed word asks for; ValueError for an unknown word."""
+    key = word.strip().lower() if isinstance(word, str) else word
+    if key not in SPEED_FACTORS:
+        raise ValueError(f"unknown speed {word!r}; use one of slowly, fast, very fast")
+    return SPEED_FACTORS[key]
+
+
+def wrap(angle: float) -> float:
+    """The angle in (-pi, pi]."""
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+def clamp(value: float, limit: float) -> float:
+    return max(-limit, min(limit, value))
+
+
+def yaw_of(q: dict) -> float:
+    """The yaw of a geometry_msgs/Quaternion dict (identity when all zero)."""
+    x, y, z, w = (float(q.get(k, 0.0)) for k in ("x", "y", "z", "w"))
+    if x == y == z == w == 0.0:
+        return 0.0
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def quaternion(yaw: float) -> dict:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
+
+
+def compose(
+    start: tuple[float, float, float], local: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """The map pose of an odometry pose, given the map pose of the odometry origin."""
+    x0, y0, yaw0 = start
+    x, y, yaw = local
+    c, s = math.cos(yaw0), math.sin(yaw0)
+    return x0 + c * x - s * y, y0 + s * x + c * y, wrap(yaw0 + yaw)
+
+
+def pose_of(msg: dict) -> tuple[float, float, float]:
+    """(x, y, yaw) of an Odometry or PoseWithCovarianceStamped (both carry pose.pose) or a PoseStamped."""
+    pose = msg.get("pose", {})
+    pose = pose.get("pose", pose) if isinstance(pose, dict) else {}
+    position = pose.get("position", {})
+    return float(position.get("x", 0.0)), float(position.get("y", 0.0)), yaw_of(pose.get("orientation", {}))
+
+
+def map_pose(odometry: dict, start_pose) -> tuple[float, float, float]:
+    """A robot's map pose from an Odometry message and its start pose ([x, y, yaw]; empty means the origin)."""
+    start = tuple(start_pose) if start_pose else (0.0, 0.0, 0.0)
+    return compose(start, pose_of(odometry))
+
+
+@dataclass
+class GoToGoal:
+    """Figure 7: turn towards the goal, then drive while correcting the heading; stop within tolerance."""
+
+    goal: tuple[float, float]
+    limits: Limits
+    factor: float = SPEED_FACTORS[None]
+    tolerance: float = TOLERANCE
+
+    def command(self, pose: tuple[float, float, float]) -> Command:
+        x, y, yaw = pose
+        dx, dy = self.goal[0] - x, self.goal[1] - y
+        distance = math.hypot(dx, dy)
+        if distance < self.tolerance:
+            return STOP
+        error = wrap(math.atan2(dy, dx) - yaw)
+        w_max, v_max = self.limits.angular * self.factor, self.limits.linear * self.factor
+        w = clamp(K_ANGULAR * error, w_max)
+        if abs(error) > TURN_FIRST:
+            return Command(0.0, _at_least(w, 0.15 * w_max))
+        v = min(v_max, max(K_LINEAR * distance, 0.25 * v_max)) * math.cos(error)
+        return Command(v, w)
+
+
+def _at_least(w: float, minimum: float) -> float:
+    """Keep a turn command above the speed at which a real base stalls."""
+    return math.copysign(max(abs(w), minimum), w)
+
+
+@dataclass
+class Rotate:
+    """Turn on the spot n full turns, counting the yaw actually turned (from odometry)."""
+
+    turns: float
+    limits: Limits
+    factor: float = SPEED_FACTORS[None]
+    turned: float = 0.0
+    _last: float | None = None
+
+    def command(self, pose: tuple[float, float, float]) -> Command:
+        yaw = pose[2]
+        if self._last is not None:
+            self.turned += abs(wrap(yaw - self._last))
+        self._last = yaw
+        remaining = 2 * math.pi * self.turns - self.turned
+        if remaining <= 0.05:
+            return STOP
+        w_max = self.limits.angular * self.factor
+        return Command(0.0, max(min(w_max, K_ANGULAR * remaining), 0.2 * w_max))
+
+
+def coverage_waypoints(
+    center: tuple[float, float], size: float = CLEAN_SIZE, lanes: int = CLEAN_LANES
+) -> list[tuple[float, float]]:
+    """A back-and-forth (boustrophedon) pattern over a size x size square centred on the location."""
+    if lanes < 2 or size <= 0:
+        raise ValueError("a coverage pattern needs at least two lanes and a positive size")
+    cx, cy = center
+    half = size / 2
+    points = []
+    for i in range(lanes):
+        y = cy - half + i * size / (lanes - 1)
+        xs = (cx - half, cx + half) if i % 2 == 0 else (cx + half, cx - half)
+        points += [(xs[0], y), (xs[1], y)]
+    return [*points, center]
+
+
+@dataclass
+class Clean:
+    """Drive the coverage pattern around a location, one GoToGoal leg after another."""
+
+    center: tuple[float, float]
+    limits: Limits
+    factor: float = SPEED_FACTORS[None]
+    legs: list[tuple[float, float]] = field(default_factory=list)
+
+    def __post_init__(self):
+        self.legs = self.legs or coverage_waypoints(self.center)
+
+    def command(self, pose: tuple[float, float, float]) -> Command:
+        while self.legs:
+            command = GoToGoal(self.legs[0], self.limits, self.factor, tolerance=0.12).command(pose)
+            if not command.done:
+                return command
+            self.legs.pop(0)
+        return STOP
+
+
+TASK_PATTERN = re.compile(r"^\s*(rotate|clean)\s*(?:\(\s*(\d+(?:\.\d+)?)\s*\))?\s*$", re.IGNORECASE)
+
+
+def parse_task(task: str) -> tuple[str, float | None]:
+    """("rotate", n) or ("clean", None) from "rotate(5)" or "clean"; ValueError for anything else."""
+    match = TASK_PATTERN.match(task or "")
+    if not match:
+        raise ValueError(f"unknown task {task!r}; known tasks: rotate(n), clean")
+    name, count = match.group(1).lower(), match.group(2)
+    if name == "rotate":
+        turns = float(count) if count is not None else 1.0
+        if turns <= 0 or turns > 100:
+            raise ValueError(f"rotate(n) needs 0 < n <= 100, got {turns}")
+        return name, turns
+    if count is not None:
+        raise ValueError("clean takes no count")
+    return name, None
+
+
+def task_controller(task: str, pose, limits: Limits, factor: float):
+    """The controller for a task started at this pose."""
+    name, count = parse_task(task)
+    if name == "rotate":
+        return Rotate(count, limits, factor)
+    return Clean((pose[0], pose[1]), limits, factor)
+
+
+# ----- messages: how commands and goals look on the wire, per ROS version and message type -----
+
+# actionlib_msgs/GoalStatus (ROS 1) and action_msgs/GoalStatus (ROS 2) -> our outcome words.
+ROS1_GOAL_STATUS = {
+    0: "active", 1: "active", 6: "active", 7: "active",  # pending, active, preempting, recalling
+    2: "cancelled", 8: "cancelled",  # preempted, recalled
+    3: "succeeded",
+    4: "failed", 5: "failed", 9: "failed",  # aborted, rejected, lost
+}  # fmt: skip
+ROS2_GOAL_STATUS = {
+    0: "failed",
+    1: "active",
+    2: "active",
+    3: "active",
+    4: "succeeded",
+    5: "cancelled",
+    6: "failed",
+}
+
+
+def stamp(t: float, ros_version: int) -> dict:
+    """A builtin time in the ROS version's field names."""
+    sec = int(t)
+    nanos = int((t - sec) * 1e9)
+    return {"secs": sec, "nsecs": nanos} if ros_version == 1 else {"sec": sec, "nanosec": nanos}
+
+
+def header(frame: str, t: float, ros_version: int) -> dict:
+    head = {"stamp": stamp(t, ros_version), "frame_id": frame}
+    return {"seq": 0, **head} if ros_version == 1 else head
+
+
+def twist(v: float, w: float) -> dict:
+    return {"linear": {"x": float(v), "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": float(w)}}
+
+
+def velocity_message(v: float, w: float, message_type: str, ros_version: int, t: float = 0.0) -> dict:
+    """A Twist, or a TwistStamped when the robot's move topic takes one."""
+    if message_type.endswith("TwistStamped"):
+        return {"header": header("base_link", t, ros_version), "twist": twist(v, w)}
+    if message_type and not message_type.endswith("Twist"):
+        raise ValueError(f"cannot command velocity over a {message_type!r} topic")
+    return twist(v, w)
+
+
+def pose_stamped(x: float, y: float, yaw: float, t: float, ros_version: int, frame: str = "map") -> dict:
+    return {
+        "header": header(frame, t, ros_version),
+        "pose": {"position": {"x": float(x), "y": float(y), "z": 0.0}, "orientation": quaternion(yaw)},
+    }
+
+
+def move_base_goal(x: float, y: float, yaw: float, goal_id: str, t: float) -> dict:
+    """A move_base_msgs/MoveBaseActionGoal with our own goal id, so status and cancel can name it."""
+    return {
+        "header": header("map", t, 1),
+        "goal_id": {"stamp": stamp(t, 1), "id": goal_id},
+        "goal": {"target_pose": pose_stamped(x, y, yaw, t, 1)},
+    }
+
+
+def goal_id(goal: str, t: float = 0.0) -> dict:
+    """An actionlib_msgs/GoalID (cancel); an empty id cancels every goal."""
+    return {"stamp": stamp(t, 1), "id": goal}
+
+
+def navigate_to_pose_goal(x: float, y: float, yaw: float, t: float) -> dict:
+    """The goal of nav2's navigate_to_pose action."""
+    return {"pose": pose_stamped(x, y, yaw, t, 2), "behavior_tree": ""}
+
+
+def move_base_outcome(status_array: dict, goal: str) -> str | None:
+    """The outcome word for our goal in an actionlib_msgs/GoalStatusArray (None if it is not listed)."""
+    for status in status_array.get("status_list", []):
+        if status.get("goal_id", {}).get("id") == goal:
+            return ROS1_GOAL_STATUS.get(int(status.get("status", 9)), "failed")
+    return None
