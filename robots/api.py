@@ -48,9 +48,43 @@ class BindingChoiceIn(Schema):
     target: str
 
 
+class RegisterIn(Schema):
+    endpoints: list[str]
+    wait: bool = False
+
+
+class EndpointResultOut(Schema):
+    url: str
+    ok: bool
+    error: str
+    robots: list[str]
+    record: int | None
+
+
+class RegisterOut(Schema):
+    task_id: str | None = None
+    results: list[EndpointResultOut] | None = None
+
+
 @router.get("", response=list[RobotOut])
 def list_robots(request):
     return Robot.objects.all()
+
+
+@router.post("/register", response={200: RegisterOut, 202: RegisterOut})
+def register_robots(request, payload: RegisterIn):
+    """Register rosbridge endpoints: queued as a Celery task, or inline with wait=true."""
+    require_perm(request, REGISTER_PERM)
+    from ninja.errors import HttpError
+
+    from robots.tasks import register_endpoints
+
+    urls = [u.strip() for u in payload.endpoints if u.strip()]
+    if not urls:
+        raise HttpError(422, "endpoints: give at least one ws:// URL")
+    if payload.wait:
+        return 200, {"results": register_endpoints(urls, request.user.pk)}
+    return 202, {"task_id": register_endpoints.delay(urls, request.user.pk).id}
 
 
 @router.get("/{name}", response=RobotDetailOut)

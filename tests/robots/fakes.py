@@ -1,0 +1,190 @@
+"""Endpoints for the registration tests: a graph-only rosbridge server and servers that are not rosbridge.
+
+GraphEndpoint serves a hand-built ROS graph through simworker's rosbridge server and rosapi (so the wire
+behaviour is the simulator's, which follows rosbridge_suite), without physics; tests mutate its graph,
+stop and restart it on the same port.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import contextlib
+import socket
+import threading
+import time
+
+from websockets.asyncio.server import serve
+
+from simworker import rosapi
+from simworker.graph import Graph
+from simworker.server import RosbridgeServer
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class LoopThread:
+    """An event loop in a daemon thread, for servers the tests start and stop."""
+
+    def __init__(self) -> None:
+        self.loop = asyncio.new_event_loop()
+        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
+        self.thread.start()
+
+    def run(self, coro, timeout: float = 10.0):
+        return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    def call(self, fn, *args):
+        future: concurrent.futures.Future = concurrent.futures.Future()
+
+        def run():
+            try:
+                future.set_result(fn(*args))
+            except BaseException as exc:
+                future.set_exception(exc)
+
+        self.loop.call_soon_threadsafe(run)
+        return future.result(5)
+
+    def close(self) -> None:
+        self.loop.call_soon_threadsafe(self.loop.stop)
+        self.thread.join(5)
+
+
+def robot_graph(graph: Graph, ns: str = "", name: str = "fakebot", wheels: int = 2) -> None:
+    """Add a small differential robot (TurtleBot3-like) under a namespace."""
+    t = graph.msg_type
+    graph.add_subscriber(f"{ns}/base_driver", f"{ns}/cmd_vel", t("geometry_msgs/Twist"))
+    graph.add_publisher(f"{ns}/base_driver", f"{ns}/odom", t("nav_msgs/Odometry"))
+    graph.add_publisher(f"{ns}/laser", f"{ns}/scan", t("sensor_msgs/LaserScan"))
+    joints = "".join(
+        f'<joint name="wheel_{i}_joint" type="continuous"><parent link="base_link"/><child link="wheel_{i}_link"/></joint>'
+        for i in range(wheels)
+    )
+    urdf = f'<robot name="{name}"><link name="base_link"/>{joints}</robot>'
+    key = (
+        f"{ns}/robot_description"
+        if graph.ros_version == 1
+        else f"{ns}/robot_state_publisher:robot_description"
+    )
+    graph.params[key] = urdf
+    if graph.ros_version == 2:
+        graph.node(f"{ns}/robot_state_publisher")
+
+
+def big_graph(graph: Graph, topics: int = 1200) -> None:
+    """One robot with `topics` topics spread over 100 nodes, plus its cmd_vel and odom."""
+    robot_graph(graph, "", "bigbot")
+    for i in range(topics - 3):
+        node = f"/sensor_node_{i % 100}"
+        graph.add_publisher(node, f"/sensors/group_{i % 40}/reading_{i}", "std_msgs/Float32")
+
+
+class GraphEndpoint:
+    """A rosbridge server for a Graph on a fixed port, in its own thread; restartable."""
+
+    def __init__(self, ros_version: int = 1, build=robot_graph, port: int | None = None) -> None:
+        self.graph = Graph(ros_version, time.time)
+        build(self.graph)
+        self.port = port or free_port()
+        self.server = RosbridgeServer("fake", self.graph, self.port)  # installs rosapi
+        rosapi.finish(self.graph)
+        self.thread = LoopThread()
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}"
+
+    def start(self) -> GraphEndpoint:
+        """Listen (again) on the same port."""
+        self.thread.run(self.server.start("127.0.0.1"))
+        return self
+
+    def stop(self) -> None:
+        """Stop listening and drop every client, as a restarting rosbridge does."""
+        self.thread.run(self.server.stop())
+
+    def mutate(self, fn) -> None:
+        """Run fn(graph) on the server's loop."""
+        self.thread.call(fn, self.graph)
+
+    def close(self) -> None:
+        self.stop()
+        self.thread.close()
+
+    def __enter__(self) -> GraphEndpoint:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class OddServer:
+    """A WebSocket server that is not rosbridge: `garbage` answers nonsense, `silent` never answers."""
+
+    def __init__(self, mode: str) -> None:
+        self.mode = mode
+        self.port = free_port()
+        self.thread = LoopThread()
+        self._server = None
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}"
+
+    async def _handle(self, ws) -> None:
+        with contextlib.suppress(Exception):
+            async for _raw in ws:
+                if self.mode == "garbage":
+                    await ws.send("<html>hello, I am not rosbridge</html>")
+
+    async def _start(self) -> None:
+        self._server = await serve(self._handle, "127.0.0.1", self.port)
+
+    async def _stop(self) -> None:
+        self._server.close()
+        await self._server.wait_closed()
+
+    def __enter__(self) -> OddServer:
+        self.thread.run(self._start())
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.thread.run(self._stop())
+        self.thread.close()
+
+
+class HttpServer:
+    """A plain HTTP server (e.g. someone's web app on the port): answers 200 and no WebSocket upgrade."""
+
+    def __init__(self) -> None:
+        self.port = free_port()
+        self.thread = LoopThread()
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}"
+
+    async def _handle(self, reader, writer) -> None:
+        await reader.readuntil(b"\r\n\r\n")
+        writer.write(b"HTTP/1.1 200 OK\r\nContent-Type: text/html\r\nContent-Length: 5\r\n\r\nhello")
+        await writer.drain()
+        writer.close()
+
+    def __enter__(self) -> HttpServer:
+        async def start():
+            self._server = await asyncio.start_server(self._handle, "127.0.0.1", self.port)
+
+        self.thread.run(start())
+        return self
+
+    def __exit__(self, *exc) -> None:
+        async def stop():
+            self._server.close()
+
+        self.thread.run(stop())
+        self.thread.close()

@@ -1,0 +1,123 @@
+"""The asyncio rosbridge client against a rosbridge server (the simulator's), and against things that are not."""
+
+import asyncio
+
+import pytest
+
+from robots.rosbridge import (
+    LinkDown,
+    NotRosbridgeError,
+    RosbridgeClient,
+    RosbridgeTimeout,
+    ServiceError,
+    UnreachableError,
+)
+from tests.robots.fakes import HttpServer, OddServer, free_port
+
+pytestmark = [pytest.mark.timeout(30), pytest.mark.asyncio]
+
+
+async def test_call_service_returns_the_values(endpoint):
+    ep = endpoint()
+    async with RosbridgeClient(ep.url) as client:
+        reply = await client.call_service("/rosapi/topic_type", {"topic": "/cmd_vel"})
+    assert reply == {"type": "geometry_msgs/Twist"}
+
+
+async def test_failed_call_raises_service_error_with_the_servers_text(endpoint):
+    ep = endpoint()
+    async with RosbridgeClient(ep.url) as client:
+        with pytest.raises(ServiceError, match="Service /nope does not exist"):
+            await client.call_service("/nope")
+
+
+async def test_unreachable_endpoint_is_a_one_line_error():
+    client = RosbridgeClient(f"ws://127.0.0.1:{free_port()}")
+    with pytest.raises(UnreachableError, match="unreachable") as info:
+        await client.connect()
+    assert "\n" not in str(info.value)
+
+
+async def test_http_server_is_not_rosbridge():
+    with HttpServer() as http:
+        with pytest.raises(NotRosbridgeError, match="HTTP 200"):
+            await RosbridgeClient(http.url).connect()
+
+
+async def test_garbage_answers_fail_the_call_at_once():
+    with OddServer("garbage") as odd:
+        async with RosbridgeClient(odd.url, call_timeout=10) as client:
+            with pytest.raises(NotRosbridgeError, match="not JSON"):
+                await client.call_service("/rosapi/topics")
+
+
+async def test_silent_server_times_out():
+    with OddServer("silent") as odd:
+        async with RosbridgeClient(odd.url, call_timeout=0.3) as client:
+            with pytest.raises(RosbridgeTimeout, match="no answer to /rosapi/topics within 0.3 s"):
+                await client.call_service("/rosapi/topics")
+            with pytest.raises(TimeoutError):  # RosbridgeTimeout is a TimeoutError
+                await client.call_service("/rosapi/nodes")
+
+
+async def test_publish_advertises_once_and_reaches_subscribers(endpoint):
+    ep = endpoint()
+    got = asyncio.Queue()
+    async with RosbridgeClient(ep.url) as listener, RosbridgeClient(ep.url) as talker:
+        await listener.subscribe("/cmd_vel", "geometry_msgs/Twist", got.put_nowait)
+        await asyncio.sleep(0.05)
+        for x in (0.1, 0.2):
+            await talker.publish("/cmd_vel", {"linear": {"x": x}}, "geometry_msgs/Twist")
+        first, second = await asyncio.wait_for(got.get(), 2), await asyncio.wait_for(got.get(), 2)
+    assert (first["linear"]["x"], second["linear"]["x"]) == (0.1, 0.2)
+
+
+async def test_unsubscribe_stops_messages(endpoint):
+    ep = endpoint()
+    got = []
+    async with RosbridgeClient(ep.url) as listener, RosbridgeClient(ep.url) as talker:
+        sub = await listener.subscribe("/cmd_vel", "geometry_msgs/Twist", got.append)
+        await asyncio.sleep(0.05)
+        await listener.unsubscribe(sub)
+        await asyncio.sleep(0.05)
+        await talker.publish("/cmd_vel", {"linear": {"x": 1.0}}, "geometry_msgs/Twist")
+        await asyncio.sleep(0.2)
+    assert got == []
+
+
+async def test_reconnects_after_restart_and_resubscribes(endpoint):
+    ep = endpoint()
+    events, got = [], asyncio.Queue()
+    client = RosbridgeClient(ep.url, ping_interval=1.0, max_backoff=0.4)
+    client.on_link(lambda up, reason: events.append(up))
+    await client.start()
+    assert await client.wait_connected(3)
+    await client.subscribe("/cmd_vel", "geometry_msgs/Twist", got.put_nowait)
+    ep.stop()
+    for _ in range(100):
+        if events[-1] is False:
+            break
+        await asyncio.sleep(0.02)
+    with pytest.raises(LinkDown):
+        await client.call_service("/rosapi/nodes")
+    ep.start()
+    assert await client.wait_connected(5)
+    async with RosbridgeClient(ep.url) as talker:
+        await asyncio.sleep(0.1)
+        await talker.publish("/cmd_vel", {"linear": {"x": 0.3}}, "geometry_msgs/Twist")
+        msg = await asyncio.wait_for(got.get(), 3)
+    await client.close()
+    assert events == [True, False, True]
+    assert msg["linear"]["x"] == 0.3
+
+
+async def test_ros2_action_goal_gets_its_result(paper_world):
+    async with RosbridgeClient(paper_world.urls["tb3_nav2"]) as client:
+        goal = await client.send_action_goal(
+            "/navigate_to_pose",
+            "nav2_msgs/action/NavigateToPose",
+            {"pose": {"header": {"frame_id": "map"}, "pose": {"position": {"x": 5.0, "y": 5.0}}}},
+        )
+        await client.cancel_action_goal(goal)
+        result = await goal.wait(5)
+    assert result["status"] in (5, 6)  # canceled (or aborted if it could not start)
