@@ -39,9 +39,8 @@ async def test_unreachable_endpoint_is_a_one_line_error():
 
 
 async def test_http_server_is_not_rosbridge():
-    with HttpServer() as http:
-        with pytest.raises(NotRosbridgeError, match="HTTP 200"):
-            await RosbridgeClient(http.url).connect()
+    with HttpServer() as http, pytest.raises(NotRosbridgeError, match="HTTP 200"):
+        await RosbridgeClient(http.url).connect()
 
 
 async def test_garbage_answers_fail_the_call_at_once():
@@ -54,7 +53,7 @@ async def test_garbage_answers_fail_the_call_at_once():
 async def test_silent_server_times_out():
     with OddServer("silent") as odd:
         async with RosbridgeClient(odd.url, call_timeout=0.3) as client:
-            with pytest.raises(RosbridgeTimeout, match="no answer to /rosapi/topics within 0.3 s"):
+            with pytest.raises(RosbridgeTimeout, match=r"no answer to /rosapi/topics within 0\.3 s"):
                 await client.call_service("/rosapi/topics")
             with pytest.raises(TimeoutError):  # RosbridgeTimeout is a TimeoutError
                 await client.call_service("/rosapi/nodes")
