@@ -1,0 +1,156 @@
+"""The pages' WebSockets: session auth, snapshot first, then deltas; commands refused for viewers and non-holders."""
+
+import pytest
+from asgiref.sync import sync_to_async
+from channels.testing import WebsocketCommunicator
+
+from fleet import leases, live
+from fleet.asgi import application
+from fleet.models import ControlLease, StateTransition
+
+pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.asyncio, pytest.mark.timeout(30)]
+
+
+@sync_to_async
+def _session_cookie(user) -> bytes:
+    from django.test import Client
+
+    client = Client()
+    client.force_login(user)
+    return f"sessionid={client.cookies['sessionid'].value}".encode()
+
+
+async def _connect(path: str, user=None) -> WebsocketCommunicator:
+    headers = [(b"origin", b"http://127.0.0.1")]
+    if user is not None:
+        headers.append((b"cookie", await _session_cookie(user)))
+    communicator = WebsocketCommunicator(application, path, headers=headers)
+    connected, _ = await communicator.connect()
+    assert connected
+    return communicator
+
+
+async def test_anonymous_is_closed_with_4401(fleet):
+    communicator = await _connect("/ws/fleet/")
+    assert await communicator.receive_output(timeout=5) == {"type": "websocket.close", "code": 4401}
+
+
+async def test_user_without_view_permission_is_closed_with_4403(fleet):
+    from django.contrib.auth.models import User
+
+    nobody = await sync_to_async(User.objects.create_user)("nobody", password="x" * 12)
+    communicator = await _connect("/ws/fleet/", nobody)
+    assert await communicator.receive_output(timeout=5) == {"type": "websocket.close", "code": 4403}
+
+
+async def test_unknown_robot_is_closed_with_4404(viewer, fleet):
+    communicator = await _connect("/ws/robots/99999/", viewer)
+    assert await communicator.receive_output(timeout=5) == {"type": "websocket.close", "code": 4404}
+
+
+async def test_snapshot_first_then_deltas(viewer, operator, fleet):
+    communicator = await _connect("/ws/fleet/", viewer)
+    snapshot = await communicator.receive_json_from(timeout=5)
+    assert snapshot["type"] == "snapshot"
+    by_name = {robot["name"]: robot for robot in snapshot["robots"]}
+    assert set(by_name) == {"turtlebot", "husky"}
+    assert by_name["turtlebot"]["state"] == "ready" and by_name["turtlebot"]["holder"] is None
+
+    turtlebot = fleet["turtlebot"]
+
+    @sync_to_async
+    def change():
+        turtlebot.state = "motion"
+        turtlebot.save()
+        live.robot_status(turtlebot)  # outside a transaction: sent at once
+        record = StateTransition.objects.create(
+            robot=turtlebot, from_state="ready", to_state="motion", reason="go"
+        )
+        live.transition(turtlebot, record)
+        leases.take(operator, turtlebot)
+        live.lease(turtlebot)
+        live.goal(turtlebot, "A", 0.2, 0.2)
+
+    await change()
+    status = await communicator.receive_json_from(timeout=5)
+    assert status["type"] == "robot.status" and status["state"] == "motion"
+    transition = await communicator.receive_json_from(timeout=5)
+    assert (transition["type"], transition["to_state"], transition["reason"]) == (
+        "robot.transition",
+        "motion",
+        "go",
+    )
+    lease = await communicator.receive_json_from(timeout=5)
+    assert lease == {**lease, "type": "lease.update", "robot": "turtlebot", "holder": "otto"}
+    goal = await communicator.receive_json_from(timeout=5)
+    assert (goal["type"], goal["name"], goal["x"]) == ("robot.goal", "A", 0.2)
+    await communicator.disconnect()
+
+
+async def test_snapshot_carries_the_holder_and_the_last_pose(viewer, operator, fleet):
+    from django.core.cache import cache
+
+    turtlebot = fleet["turtlebot"]
+    await sync_to_async(leases.take)(operator, turtlebot)
+    pose = {"id": turtlebot.pk, "x": 1.0, "y": 2.0, "yaw": 0.5, "v": 0.1, "w": 0.0, "t": 0.0}
+    await sync_to_async(cache.set)(live.POSE_CACHE_KEY.format(id=turtlebot.pk), pose)
+    communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", viewer)
+    snapshot = await communicator.receive_json_from(timeout=5)
+    assert snapshot["robots"][0]["holder"] == "otto"
+    assert snapshot["robots"][0]["pose"] == pose
+    await communicator.disconnect()
+
+
+async def test_pose_batches_reach_the_dashboard_and_the_robot_page_gets_only_its_own(viewer, fleet):
+    from channels.layers import get_channel_layer
+
+    turtlebot, husky = fleet["turtlebot"], fleet["husky"]
+    dashboard = await _connect("/ws/fleet/", viewer)
+    page = await _connect(f"/ws/robots/{husky.pk}/", viewer)
+    await dashboard.receive_json_from(timeout=5)
+    await page.receive_json_from(timeout=5)
+    batch = [
+        {"id": turtlebot.pk, "x": 1.0, "y": 1.0, "yaw": 0.0, "v": 0.2, "w": 0.0, "t": 1.0},
+        {"id": husky.pk, "x": 2.0, "y": 2.0, "yaw": 0.0, "v": 0.5, "w": 0.0, "t": 1.0},
+    ]
+    await get_channel_layer().group_send(live.POSES_GROUP, live.poses(batch))
+    assert (await dashboard.receive_json_from(timeout=5))["poses"] == batch
+    assert (await page.receive_json_from(timeout=5))["poses"] == [batch[1]]
+    await dashboard.disconnect()
+    await page.disconnect()
+
+
+async def test_viewer_stop_over_the_socket_is_refused(viewer, fleet):
+    communicator = await _connect("/ws/fleet/", viewer)
+    await communicator.receive_json_from(timeout=5)
+    await communicator.send_json_to({"command": "stop", "robots": "all", "ref": 7})
+    reply = await communicator.receive_json_from(timeout=5)
+    assert reply["type"] == "command.result" and reply["ok"] is False and reply["ref"] == 7
+    assert "may only view" in reply["detail"]
+    await communicator.disconnect()
+
+
+async def test_teleop_of_a_robot_held_by_someone_else_is_refused(operator, second_operator, fleet):
+    turtlebot = fleet["turtlebot"]
+    await sync_to_async(leases.take)(operator, turtlebot)
+    communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", second_operator)
+    await communicator.receive_json_from(timeout=5)
+    await communicator.send_json_to({"command": "teleop", "robot": turtlebot.pk, "linear": 0.1, "angular": 0})
+    reply = await communicator.receive_json_from(timeout=5)
+    assert reply["ok"] is False and "held by otto" in reply["detail"]
+    assert await sync_to_async(ControlLease.objects.get)(robot=turtlebot) is not None
+    await communicator.disconnect()
+
+
+async def test_unknown_and_malformed_commands_are_answered_not_crashed(operator, fleet):
+    communicator = await _connect("/ws/fleet/", operator)
+    await communicator.receive_json_from(timeout=5)
+    await communicator.send_json_to({"command": "dance"})
+    assert "unknown" in (await communicator.receive_json_from(timeout=5))["detail"]
+    await communicator.send_json_to({"command": "teleop", "robot": fleet["turtlebot"].pk, "linear": "fast"})
+    assert "linear: must be a number" in (await communicator.receive_json_from(timeout=5))["detail"]
+    await communicator.send_json_to({"command": "stop", "robots": "some"})
+    assert "robots:" in (await communicator.receive_json_from(timeout=5))["detail"]
+    await communicator.send_json_to(["not", "an", "object"])
+    assert (await communicator.receive_json_from(timeout=5))["ok"] is False
+    await communicator.disconnect()
