@@ -42,7 +42,7 @@ def connection() -> redis.Redis:
 
 
 def key(*parts) -> str:
-    prefix = getattr(settings, "FLEET_EXEC_KEY_PREFIX", "fleet:exec")
+    prefix = getattr(settings, "FLEET_EXEC_KEY_PREFIX", "") or "fleet:exec"
     return ":".join([prefix, *map(str, parts)])
 
 

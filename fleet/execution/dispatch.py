@@ -13,9 +13,11 @@ Rules (the paper's Figure 6 and section 3.8):
 from __future__ import annotations
 
 import math
+import threading
 from collections import defaultdict
 
-from django.db import transaction
+from django.conf import settings
+from django.db import connections, transaction
 from django.utils import timezone
 
 from fleet import statemachine
@@ -169,6 +171,22 @@ def dispatch(instruction: Instruction, per_robot: dict[Robot, list[dict]]) -> li
 def _after_commit(instruction_id: int, preempts: list[tuple[int, int]]) -> None:
     for robot_id, execution_id in preempts:
         coordination.request_preempt(robot_id, execution_id)
-    from fleet.tasks import execute_instruction
+    launch("execute_instruction", instruction_id)
 
-    execute_instruction.delay(instruction_id)
+
+def launch(task: str, pk: int) -> None:
+    """Start a fleet task: on the Celery workers (FLEET_EXECUTE=celery, the default) or in a thread here."""
+    from fleet import tasks
+
+    if getattr(settings, "FLEET_EXECUTE", "celery") == "thread":
+        threading.Thread(target=_in_thread, args=(getattr(tasks, task), pk), daemon=True).start()
+        return
+    queue = getattr(settings, "FLEET_EXECUTE_QUEUE", "") or None
+    getattr(tasks, task).apply_async((pk,), queue=queue)
+
+
+def _in_thread(task, pk: int) -> None:
+    try:
+        task.run(pk)
+    finally:
+        connections.close_all()

@@ -54,11 +54,11 @@ def stalled_robots() -> list[int]:
 
 def kick_stalled() -> list[int]:
     """Send a drain task for each stalled robot (at most one every few seconds per robot)."""
-    from fleet.tasks import drain_robot
+    from fleet.execution.dispatch import launch
 
     kicked = []
     for robot_id in stalled_robots():
         if coordination.connection().set(coordination.key("kick", robot_id), 1, nx=True, ex=5):
-            drain_robot.delay(robot_id)
+            launch("drain_robot", robot_id)
             kicked.append(robot_id)
     return kicked
