@@ -142,3 +142,8 @@ FLEET_DEMO_SCHEDULES = env_bool("FLEET_DEMO_SCHEDULES", default=False)
 FLEET_ADMIN_PASSWORD = env_str("FLEET_ADMIN_PASSWORD", min_length=8)
 FLEET_CONTROL_LEASE_SECONDS = 300
 FLEET_IDLE_TIMEOUT_SECONDS = 600
+# Execution (issue 6): where instructions run (celery workers, or "thread" in-process for tests), an optional
+# queue override, and the Redis key prefix of robot locks and flags (distinct per test run).
+FLEET_EXECUTE = os.environ.get("FLEET_EXECUTE", "celery")
+FLEET_EXECUTE_QUEUE = os.environ.get("FLEET_EXECUTE_QUEUE", "")
+FLEET_EXEC_KEY_PREFIX = os.environ.get("FLEET_EXEC_KEY_PREFIX", "fleet:exec")
