@@ -3,7 +3,7 @@
 from datetime import datetime
 
 from django.shortcuts import get_object_or_404
-from ninja import Router, Schema
+from ninja import Router, Schema, Status
 
 from fleet.roles import REGISTER_PERM, require_perm
 from robots.models import Binding, Robot
@@ -83,8 +83,8 @@ def register_robots(request, payload: RegisterIn):
     if not urls:
         raise HttpError(422, "endpoints: give at least one ws:// URL")
     if payload.wait:
-        return 200, {"results": register_endpoints(urls, request.user.pk)}
-    return 202, {"task_id": register_endpoints.delay(urls, request.user.pk).id}
+        return Status(200, {"results": register_endpoints(urls, request.user.pk)})
+    return Status(202, {"task_id": register_endpoints.delay(urls, request.user.pk).id})
 
 
 @router.get("/{name}", response=RobotDetailOut)

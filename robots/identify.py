@@ -37,6 +37,7 @@ from robots.discovery import Graph, norm_type
 ACTIONS = ("move", "odometry", "pose", "navigate", "scan", "map", "initial_pose", "battery")
 ESSENTIAL = {"move", "odometry"}
 TIE = 1e-6
+MAX_WEIGHT = 1.5  # a TopicKeyword weight counts at most this much, so names never outweigh graph facts
 
 
 @dataclass(frozen=True)
@@ -152,16 +153,16 @@ def tokens(relative: str) -> set[str]:
 def name_score(
     relative: str, action: str, vocab: Vocabulary, canonical: tuple[str, ...]
 ) -> tuple[float, str]:
-    """Score a name for an action and say how it matched."""
-    if relative in canonical:
-        return 0.3 + 0.1, "exact"
+    """Score a name for an action and say how it matched (exact always beats last-segment by 0.2)."""
     words = tokens(relative)
     score, how = 0.0, ""
-    if relative.rsplit("/", 1)[-1] in canonical:
+    if relative in canonical:
+        score, how = 0.4, "exact"
+    elif relative.rsplit("/", 1)[-1] in canonical:
         score, how = 0.2, "pattern"
-    weights = [w for k, w in vocab.keywords.get(action, {}).items() if k in words]
+    weights = [min(w, MAX_WEIGHT) for k, w in vocab.keywords.get(action, {}).items() if k in words]
     if weights:
-        score, how = score + 0.1 * max(weights), "pattern"
+        score, how = score + 0.1 * max(weights), how or "pattern"
     if not how and words & vocab.synonyms.get(action, set()):
         score, how = score + 0.05, "synonym"
     return score, how or "pattern"

@@ -1,0 +1,168 @@
+"""Registration end to end: the demo world, failing endpoints, re-registration, a person's choice, --json, the API."""
+
+import json
+from io import StringIO
+
+import pytest
+from django.core.management import CommandError, call_command
+
+from fleet.models import TimeSlot
+from robots.binding import choose
+from robots.models import Binding, RegistrationRecord, Robot, Topic
+from robots.registration import register_endpoints
+from tests.robots.fakes import HttpServer, OddServer, free_port, robot_graph
+
+pytestmark = [pytest.mark.timeout(60), pytest.mark.django_db]
+
+DEMO = ("robots", "turtlebot", "husky", "tiago")
+
+
+def bound(robot: Robot, action: str) -> str:
+    return robot.bindings.get(action=action).target
+
+
+def test_demo_world_registers_seven_robots_with_move_odometry_and_wheels(paper_world):
+    from fleet.worlds import load_world_into_db
+
+    load_world_into_db("paper")
+    results = register_endpoints([paper_world.urls[k] for k in DEMO])
+    assert all(r.ok for r in results), [r.error for r in results]
+    robots = {r.name: r for r in Robot.objects.all()}
+    assert set(robots) == {"turtlebot", "husky", "tiago", "robot1", "robot2", "robot3", "robot4"}
+    expected = {
+        "turtlebot": ("/cmd_vel", "/odom", 2),
+        "husky": ("/cmd_vel", "/husky_velocity_controller/odom", 4),
+        "tiago": ("/nav_vel", "/mobile_base_controller/odom", 2),
+        **{f"robot{i}": (f"/robot{i}/cmd_vel", f"/robot{i}/odom", 2) for i in range(1, 5)},
+    }
+    for name, (move, odom, wheels) in expected.items():
+        robot = robots[name]
+        assert (bound(robot, "move"), bound(robot, "odometry"), robot.wheel_count) == (move, odom, wheels), (
+            name
+        )
+        assert robot.link_status == Robot.Link.ONLINE
+    assert robots["robot3"].namespace == "/robot3"
+    assert robots["husky"].model == "husky" and robots["husky"].max_linear == 1.0
+    assert robots["tiago"].start_pose == pytest.approx([0.0, -3.0, 1.5708], abs=1e-3)
+    assert bound(robots["robot1"], "navigate") == "/robot1/move_base"
+    assert TimeSlot.objects.filter(robot__name="tiago").count() == 3  # Table 12 slots attached
+
+
+def test_ros2_and_legged_robots_register(paper_world):
+    register_endpoints([paper_world.urls["tb3_nav2"], paper_world.urls["spot"]])
+    nav2, spot = Robot.objects.get(name="tb3_nav2"), Robot.objects.get(name="spot")
+    assert (nav2.ros_version, bound(nav2, "navigate")) == (2, "/navigate_to_pose")
+    assert nav2.bindings.get(action="navigate").kind == Binding.Kind.ACTION
+    assert (spot.drive, spot.leg_count, spot.wheel_count) == ("legged", 4, 0)
+    assert bound(spot, "move") == "/spot/cmd_vel"
+
+
+def test_failing_endpoints_give_one_line_errors_while_the_others_register(endpoint):
+    good = endpoint()
+    with OddServer("garbage") as garbage, OddServer("silent") as silent, HttpServer() as http:
+        down = f"ws://127.0.0.1:{free_port()}"
+        results = register_endpoints([good.url, down, garbage.url, silent.url, http.url], call_timeout=0.5)
+    by_url = {r.url: r for r in results}
+    assert by_url[good.url].ok and by_url[good.url].robots == ["fakebot"]
+    assert "unreachable" in by_url[down].error
+    assert "not a rosbridge server" in by_url[garbage.url].error
+    assert "no answer to /rosapi/topics" in by_url[silent.url].error
+    assert "HTTP 200" in by_url[http.url].error
+    for result in results:
+        assert "\n" not in result.error
+    assert RegistrationRecord.objects.filter(ok=False).count() == 4
+
+
+def test_reregistration_updates_in_place_and_records_what_changed(endpoint):
+    ep = endpoint()
+    register_endpoints([ep.url])
+    robot = Robot.objects.get(name="fakebot")
+    assert bound(robot, "scan") == "/scan"
+
+    def change(graph):
+        graph.node("/laser").pubs.discard("/scan")
+        graph.add_publisher("/bumper", "/bumper", "std_msgs/Bool")
+
+    ep.mutate(change)
+    (result,) = register_endpoints([ep.url])
+    assert Robot.objects.count() == 1 and Robot.objects.get().pk == robot.pk
+    assert set(Topic.objects.filter(robot=robot).values_list("name", flat=True)) == {
+        "/cmd_vel",
+        "/odom",
+        "/bumper",
+    }
+    changes = RegistrationRecord.objects.get(pk=result.record_id).changes["fakebot"]
+    assert changes["topics_added"] == ["/bumper"] and changes["topics_removed"] == ["/scan"]
+    assert changes["bindings_changed"] == {"scan": ["/scan", ""]}
+    assert Binding.objects.filter(robot=robot).count() == 8
+
+
+def test_a_persons_choice_survives_reregistration_while_its_target_exists(endpoint, fleet_admin):
+    def two_inputs(graph):
+        robot_graph(graph)
+        graph.add_subscriber("/base_driver", "/teleop/cmd_vel", "geometry_msgs/Twist")
+
+    ep = endpoint(build=two_inputs)
+    register_endpoints([ep.url])
+    robot = Robot.objects.get(name="fakebot")
+    assert bound(robot, "move") == "/cmd_vel"
+    choose(robot, "move", "/teleop/cmd_vel", fleet_admin)
+    register_endpoints([ep.url])
+    move = robot.bindings.get(action="move")
+    assert (move.target, move.how) == ("/teleop/cmd_vel", "user")
+
+    ep.mutate(lambda g: g.node("/base_driver").subs.discard("/teleop/cmd_vel"))
+    (result,) = register_endpoints([ep.url])
+    assert (bound(robot, "move"), robot.bindings.get(action="move").how) == ("/cmd_vel", "exact")
+    assert result.changes["fakebot"]["user_choices_dropped"] == ["move: /teleop/cmd_vel"]
+
+
+def test_same_urdf_name_on_two_endpoints_gets_distinct_robot_names(endpoint):
+    first, second = endpoint(), endpoint()
+    register_endpoints([first.url, second.url])
+    names = sorted(Robot.objects.values_list("name", flat=True))
+    assert names == sorted(["fakebot", f"fakebot-127.0.0.1-{second.port}"])
+
+
+def test_register_command_json_shape(endpoint):
+    ep = endpoint()
+    out = StringIO()
+    call_command("register", ep.url, "--json", stdout=out)
+    (robot,) = json.loads(out.getvalue())
+    assert set(robot) == {
+        "name",
+        "endpoint",
+        "namespace",
+        "model",
+        "drive",
+        "wheels",
+        "ros_version",
+        "bindings",
+        "needs_user",
+    }
+    assert robot["bindings"]["move"] == {
+        "topic": "/cmd_vel",
+        "type": "geometry_msgs/Twist",
+        "how": "exact",
+        "confidence": 1.0,
+    }
+    assert (robot["wheels"], robot["drive"], robot["needs_user"]) == (2, "wheeled", [])
+
+
+def test_register_command_fails_only_if_an_endpoint_failed(endpoint):
+    ep = endpoint()
+    err = StringIO()
+    with pytest.raises(CommandError, match="1 of 2 endpoints failed"):
+        call_command("register", ep.url, f"ws://127.0.0.1:{free_port()}", stdout=StringIO(), stderr=err)
+    assert "unreachable" in err.getvalue()
+    assert Robot.objects.filter(name="fakebot").exists()
+
+
+def test_api_register_inline_needs_the_register_permission(endpoint, client_for, fleet_admin, viewer):
+    ep = endpoint()
+    body = {"endpoints": [ep.url], "wait": True}
+    denied = client_for(viewer).post("/api/robots/register", body, content_type="application/json")
+    assert denied.status_code == 403
+    ok = client_for(fleet_admin).post("/api/robots/register", body, content_type="application/json")
+    assert ok.status_code == 200
+    assert ok.json()["results"][0]["robots"] == ["fakebot"]
