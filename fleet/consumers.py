@@ -5,6 +5,7 @@ Commands from the browser (stop, teleop) are checked here against the user's rol
 exactly as the pages' POST views check them (both call ``run_command``).
 """
 
+import logging
 import math
 
 from channels.db import database_sync_to_async
@@ -13,6 +14,7 @@ from channels.generic.websocket import AsyncJsonWebsocketConsumer
 from fleet import live
 
 VIEW_PERM = "robots.view_robot"
+log = logging.getLogger(__name__)
 
 
 class CommandError(Exception):
@@ -57,6 +59,15 @@ def _control():
     return control
 
 
+def _call(action, *args):
+    """Run a control action; whatever it refuses or fails with becomes an answer for the person."""
+    try:
+        return action(*args)
+    except Exception as exc:  # a refusal, an unbound topic, a link that is down: all said in words
+        log.warning("command %s refused or failed: %s", getattr(action, "__name__", action), exc)
+        raise CommandError(str(exc) or exc.__class__.__name__) from exc
+
+
 def command_stop(user, content: dict) -> str:
     """Stop the robots named (or all): every one the user may command; say which were not."""
     from fleet.roles import can_control
@@ -64,10 +75,10 @@ def command_stop(user, content: dict) -> str:
     if not can_control(user):
         raise CommandError(f"{user.username} may only view robots, not command them.")
     robots, refused = _robots_for(user, content.get("robots", "all"))
-    if robots:
-        _control().stop(robots, user)
+    results = _call(_control().stop, robots, user) if robots else {}
+    unreached = [f"{name}: {result}" for name, result in (results or {}).items() if result != "stopped"]
     stopped = ", ".join(robot.name for robot in robots) or "no robot"
-    return f"Stopped {stopped}." + ("".join(f" {reason}" for reason in refused))
+    return f"Stopped {stopped}." + "".join(f" {reason}" for reason in [*unreached, *refused])
 
 
 def command_teleop(user, content: dict) -> str:
@@ -88,7 +99,7 @@ def command_teleop(user, content: dict) -> str:
         check_command(user, robot)
     except ControlRefused as exc:
         raise CommandError(str(exc)) from exc
-    _control().teleop(robot, user, linear, angular)
+    _call(_control().teleop, robot, user, linear, angular)
     return f"{robot.name}: linear {linear:.2f} m/s, angular {angular:.2f} rad/s"
 
 

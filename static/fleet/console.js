@@ -83,8 +83,12 @@ export class Console {
   async answer(instruction, text) {
     if (!text) return;
     try {
-      const taught = await request("/api/interpreter/teach", { answer: text, answer_text: text, text, instruction: instruction.id });
-      toast(taught && taught.detail ? taught.detail : `Learned: ${text}`);
+      const taught = await request("/api/interpreter/teach", { answer: text, instruction_id: instruction.id });
+      if (taught && taught.ok === false) {
+        toast(`${taught.message}${taught.examples ? ` Try e.g. "${taught.examples[0]}".` : ""}`, true);
+        return;
+      }
+      toast((taught && taught.message) || `Learned: ${text}`);
       await this.submit(instruction.text); // ask again, now that the interpreter knows
     } catch (error) {
       toast(`Answer not understood: ${error.message}`, true);

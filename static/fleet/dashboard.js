@@ -52,3 +52,5 @@ connectLive("/ws/fleet/", {
   },
   "command.result"(message) { toast(message.detail, !message.ok); },
 });
+
+window.fleet = { map, table, console: console_ }; // for the browser tests and the curious

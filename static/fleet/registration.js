@@ -4,7 +4,6 @@ import { connectLive } from "./live.js";
 
 const progress = document.getElementById("reg-progress");
 const form = document.getElementById("register-form");
-let waiting = 0;
 
 function say(text, bad = false) {
   const li = document.createElement("li");
@@ -21,12 +20,12 @@ if (form) {
     form.querySelector("button").disabled = true;
     say(`registering ${urls.length} endpoint(s)…`);
     try {
-      const reply = await request("/api/robots/register", { urls, endpoints: urls });
-      waiting = urls.length;
-      const robots = Array.isArray(reply) ? reply : (reply && (reply.robots || reply.results)) || [];
-      if (robots.length) say(`registered: ${robots.map((robot) => robot.name || robot).join(", ")}`);
-      if (reply && reply.detail) say(reply.detail);
-      setTimeout(() => location.reload(), robots.length ? 1200 : 6000);
+      const reply = await request("/api/robots/register", { endpoints: urls, wait: true });
+      (reply.results || []).forEach((result) => say(result.ok
+        ? `${result.url}: registered ${result.robots.join(", ") || "no robot"}`
+        : `${result.url}: failed: ${result.error}`, !result.ok));
+      say("done; reloading to show the robots and any choices to make");
+      setTimeout(() => location.reload(), 1500);
     } catch (error) {
       say(`registration refused: ${error.message}`, true);
       toast(error.message, true);
@@ -39,10 +38,6 @@ if (form) {
 connectLive("/ws/fleet/", {
   "registration.progress"(message) {
     say(`${message.endpoint}: ${message.stage}${message.message ? ` (${message.message})` : ""}${message.robots && message.robots.length ? `: ${message.robots.join(", ")}` : ""}`, message.ok === false);
-    if (["done", "failed"].includes(message.stage)) {
-      waiting -= 1;
-      if (waiting <= 0) setTimeout(() => location.reload(), 800);
-    }
   },
   "robot.status"(message) {
     say(`${message.robot}: ${message.link_status}, ${message.state}`);
