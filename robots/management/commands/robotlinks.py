@@ -1,0 +1,79 @@
+"""`python manage.py robotlinks [--register-world paper] [--register URL ...]`: keep robot links until SIGTERM."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+
+from asgiref.sync import sync_to_async
+from django.core.management.base import BaseCommand, CommandError
+
+from robots.links import LinkManager, wait_for_endpoints
+from robots.registration import discover_all, store_all
+
+
+def world_endpoints(name: str, host: str, port_base: int) -> list[str]:
+    """The URLs of a simulator world's endpoints that carry robots."""
+    from simworker.world import WorldFormatError, load_world
+
+    try:
+        world = load_world(name)
+    except (OSError, WorldFormatError) as exc:
+        raise CommandError(str(exc)) from exc
+    used = {r.endpoint for r in world.robots}
+    return [f"ws://{host}:{port_base + ep.port_offset}" for ep in world.endpoints if ep.key in used]
+
+
+class Command(BaseCommand):
+    help = "Keep one rosbridge link per registered endpoint: robots' online/offline status, live."
+
+    def add_arguments(self, parser):
+        parser.add_argument(
+            "--register-world", metavar="WORLD", help="first register this simulator world's endpoints"
+        )
+        parser.add_argument(
+            "--register", nargs="+", default=[], metavar="URL", help="first register these endpoints"
+        )
+        parser.add_argument("--host", default="127.0.0.1", help="host of the world's endpoints")
+        parser.add_argument(
+            "--port-base", type=int, default=9090, help="port of the world's endpoint offset 0"
+        )
+        parser.add_argument(
+            "--wait", type=float, default=30.0, help="seconds to wait for endpoints to answer"
+        )
+        parser.add_argument(
+            "--only", action="store_true", help="link only the endpoints given here, not every registered one"
+        )
+
+    def handle(self, *args, **opts):
+        urls = list(opts["register"])
+        if opts["register_world"]:
+            urls += world_endpoints(opts["register_world"], opts["host"], opts["port_base"])
+        if opts["only"] and not urls:
+            raise CommandError("--only needs --register or --register-world")
+        asyncio.run(self.main(urls, opts["wait"], opts["only"]))
+
+    async def main(self, urls: list[str], wait: float, only: bool) -> None:
+        manager = LinkManager(urls if only else None)
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, manager.stop)
+        if urls:
+            await self.register(urls, wait, manager.stopping)
+        self.stdout.write("robot links running (Ctrl-C to stop)")
+        await manager.run()
+        self.stdout.write("robot links stopped")
+
+    async def register(self, urls: list[str], wait: float, stopping: asyncio.Event) -> None:
+        ready = await wait_for_endpoints(urls, wait, stopping)
+        for url in urls:
+            if url not in ready:
+                self.stderr.write(f"error: {url}: did not answer within {wait:g} s; not registered")
+        if not ready:
+            return
+        found = await discover_all(ready)
+        for result in await sync_to_async(store_all)(ready, found):
+            if result.ok:
+                self.stdout.write(f"registered {result.url}: {', '.join(result.robots)}")
+            else:
+                self.stderr.write(f"error: {result.error}")

@@ -1,0 +1,80 @@
+"""Liveness: a link per endpoint; offline when the endpoint goes away, online again after it restarts, pushed live."""
+
+import asyncio
+
+import pytest
+from asgiref.sync import sync_to_async
+from channels.layers import get_channel_layer
+
+from fleet.live import FLEET_GROUP
+from robots.links import LinkManager
+from robots.models import Robot
+from robots.registration import register_endpoints
+
+pytestmark = [pytest.mark.timeout(60), pytest.mark.asyncio, pytest.mark.django_db(transaction=True)]
+
+
+async def status_of(name: str) -> str:
+    return (await Robot.objects.aget(name=name)).link_status
+
+
+async def wait_status(name: str, status: str, timeout: float = 5.0) -> None:
+    for _ in range(int(timeout / 0.05)):
+        if await status_of(name) == status:
+            return
+        await asyncio.sleep(0.05)
+    raise AssertionError(f"{name} never became {status}")
+
+
+async def next_status(layer, channel: str) -> dict:
+    while True:
+        msg = await asyncio.wait_for(layer.receive(channel), 5)
+        if msg.get("type") == "robot.status":
+            return msg
+
+
+async def test_offline_then_online_after_the_endpoint_restarts_and_hooks_resubscribe(endpoint):
+    ep = endpoint()
+    await sync_to_async(register_endpoints)([ep.url])
+    layer = get_channel_layer()
+    channel = await layer.new_channel()
+    await layer.group_add(FLEET_GROUP, channel)
+    seen = asyncio.Queue()
+
+    async def odom_hook(client, robots):
+        (robot,) = robots
+        topic, type_ = robot["bindings"]["odometry"]
+        await client.subscribe(topic, type_, seen.put_nowait)
+
+    manager = LinkManager([ep.url], hooks=[odom_hook])
+    task = asyncio.create_task(manager.run())
+    try:
+        await asyncio.sleep(0.3)
+        ep.stop()
+        await wait_status("fakebot", Robot.Link.OFFLINE)
+        assert (await next_status(layer, channel))["link_status"] == "offline"
+        ep.start()
+        await wait_status("fakebot", Robot.Link.ONLINE)
+        pushed = await next_status(layer, channel)
+        assert (pushed["robot"], pushed["link_status"]) == ("fakebot", "online")
+        assert pushed["last_seen"] is not None
+        ep.thread.call(ep.server.publish, "/odom", {"pose": {"pose": {"position": {"x": 1.5}}}})
+        msg = await asyncio.wait_for(seen.get(), 5)  # the hook's subscription was renewed after the restart
+        assert msg["pose"]["pose"]["position"]["x"] == 1.5
+    finally:
+        manager.stop()
+        await asyncio.wait_for(task, 10)
+        await layer.group_discard(FLEET_GROUP, channel)
+
+
+async def test_an_endpoint_that_is_down_from_the_start_is_offline(endpoint):
+    ep = endpoint()
+    await sync_to_async(register_endpoints)([ep.url])
+    ep.stop()
+    manager = LinkManager([ep.url])
+    task = asyncio.create_task(manager.run())
+    try:
+        await wait_status("fakebot", Robot.Link.OFFLINE)
+    finally:
+        manager.stop()
+        await asyncio.wait_for(task, 10)
