@@ -95,20 +95,26 @@ def radius_of(robot: Robot) -> float:
 
 
 def ring_goals(destination: dict, robots: list[Robot], poses: dict) -> dict[int, dict]:
-    """A goal per robot on a ring around the destination, assigned in the order of the robots' bearings."""
+    """A goal per robot on a ring around the destination, in the cyclic order of the robots' bearings.
+
+    The ring's rotation is the circular mean of (bearing - slot angle), so each robot's slot lies on its own
+    side of the destination and the paths of neighbours do not cross.
+    """
     cx, cy = float(destination["x"]), float(destination["y"])
+    n = len(robots)
     spacing = 2 * max(radius_of(robot) for robot in robots) + RING_MARGIN
-    radius = max(spacing / (2 * math.sin(math.pi / len(robots))), spacing) if len(robots) > 1 else 0.0
+    radius = max(spacing / (2 * math.sin(math.pi / n)), spacing) if n > 1 else 0.0
 
     def bearing(robot):
         x, y, _ = poses.get(robot.pk) or (robot.start_pose or (cx - 1.0, cy, 0.0))
         return math.atan2(y - cy, x - cx)
 
     ordered = sorted(robots, key=bearing)
-    first = bearing(ordered[0]) if ordered else 0.0
+    offsets = [bearing(robot) - 2 * math.pi * i / n for i, robot in enumerate(ordered)]
+    rotation = math.atan2(sum(map(math.sin, offsets)), sum(map(math.cos, offsets)))
     goals = {}
     for i, robot in enumerate(ordered):
-        angle = first + 2 * math.pi * i / len(ordered)
+        angle = rotation + 2 * math.pi * i / n
         goals[robot.pk] = {
             **destination,
             "x": round(cx + radius * math.cos(angle), 3),

@@ -1,0 +1,48 @@
+"""Hand-made interpreter results and waiting helpers for execution tests."""
+
+import time
+
+from fleet.models import Instruction, StateTransition
+
+
+def step(robots, x=None, y=None, name="P", task=None, speed="very fast", action="move"):
+    """One interpreter step (the contract of interpreter.service.interpret)."""
+    destination = {"name": name, "x": x, "y": y} if x is not None else None
+    return {"action": action, "robots": robots, "destination": destination, "task": task, "speed": speed}
+
+
+def parse(*steps):
+    return {
+        "type": "I",
+        "valid": True,
+        "needs_user": False,
+        "question": None,
+        "steps": list(steps),
+        "reason": "",
+    }
+
+
+def wait_final(instruction: Instruction, timeout: float = 40.0) -> Instruction:
+    """Poll until the instruction is final (the timeout only guards against a hang; it asserts nothing)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        instruction.refresh_from_db()
+        if instruction.is_final:
+            return instruction
+        time.sleep(0.05)
+    raise AssertionError(f"instruction #{instruction.pk} still {instruction.status}: {instruction.outcome}")
+
+
+def wait_for(predicate, timeout: float = 20.0, what: str = "condition"):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def transitions(robot_name: str) -> list[tuple[str, str, str, int | None]]:
+    rows = StateTransition.objects.filter(robot__name=robot_name).order_by("at", "pk")
+    return list(rows.values_list("from_state", "to_state", "reason", "instruction_id"))

@@ -1,0 +1,132 @@
+"""Move-to-goal (the paper's Figure 7), tasks, poses and the wire messages, without ROS or Django."""
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fleet import motion
+from fleet.motion import GoToGoal, Limits, Rotate
+
+TB3 = Limits(0.22, 2.84)
+
+
+def simulate(controller, pose, dt=0.05, steps=4000):
+    """Integrate a unicycle under the controller's commands; return the final pose and the commands."""
+    x, y, yaw = pose
+    commands = []
+    for _ in range(steps):
+        command = controller.command((x, y, yaw))
+        commands.append(command)
+        if command.done:
+            return (x, y, yaw), commands
+        x += command.v * math.cos(yaw) * dt
+        y += command.v * math.sin(yaw) * dt
+        yaw = motion.wrap(yaw + command.w * dt)
+    raise AssertionError("controller did not finish")
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(-5, 5), st.floats(-5, 5), st.floats(-math.pi, math.pi), st.floats(-5, 5), st.floats(-5, 5),
+    st.sampled_from([None, "slowly", "fast", "very fast"]),
+)  # fmt: skip
+def test_go_to_goal_arrives_within_tolerance_and_limits(x, y, yaw, gx, gy, speed):
+    factor = motion.speed_factor(speed)
+    controller = GoToGoal((gx, gy), TB3, factor)
+    (fx, fy, _), commands = simulate(controller, (x, y, yaw))
+    assert math.hypot(fx - gx, fy - gy) < motion.TOLERANCE
+    assert all(
+        abs(c.v) <= TB3.linear * factor + 1e-9 and abs(c.w) <= TB3.angular * factor + 1e-9 for c in commands
+    )
+    assert commands[-1] == motion.STOP
+
+
+def test_go_to_goal_turns_first_when_the_goal_is_behind():
+    command = GoToGoal((-1.0, 0.0), TB3).command((0.0, 0.0, 0.0))
+    assert command.v == 0.0
+    assert command.w != 0.0
+
+
+def test_rotate_counts_full_turns_from_odometry():
+    controller = Rotate(2, TB3)
+    (_, _, _), commands = simulate(controller, (0.0, 0.0, 0.3))
+    assert controller.turned == pytest.approx(4 * math.pi, abs=0.1)
+    assert all(c.v == 0.0 for c in commands)
+
+
+def test_clean_covers_the_square_around_the_location():
+    controller = motion.Clean((1.0, 1.0), TB3)
+    visited = []
+    x, y, yaw, dt = 1.0, 1.0, 0.0, 0.05
+    for _ in range(10000):
+        command = controller.command((x, y, yaw))
+        if command.done:
+            break
+        x += command.v * math.cos(yaw) * dt
+        y += command.v * math.sin(yaw) * dt
+        yaw = motion.wrap(yaw + command.w * dt)
+        visited.append((x, y))
+    else:
+        raise AssertionError("clean did not finish")
+    half = motion.CLEAN_SIZE / 2
+    for corner in [(1 - half, 1 - half), (1 + half, 1 - half), (1 - half, 1 + half), (1 + half, 1 + half)]:
+        assert min(math.dist(corner, p) for p in visited) < 0.15
+
+
+@pytest.mark.parametrize(
+    ("task", "parsed"),
+    [("rotate(5)", ("rotate", 5.0)), ("clean", ("clean", None)), ("Rotate ( 2 )", ("rotate", 2.0))],
+)
+def test_parse_task(task, parsed):
+    assert motion.parse_task(task) == parsed
+
+
+@pytest.mark.parametrize("task", ["dance", "rotate(-1)", "rotate(1000)", "clean(3)", "", None])
+def test_parse_task_refuses_unknown_tasks(task):
+    with pytest.raises(ValueError):
+        motion.parse_task(task)
+
+
+def test_speed_words_and_unknown_speed():
+    assert motion.speed_factor("slowly") < motion.speed_factor(None) < motion.speed_factor("fast") <= 1.0
+    assert motion.speed_factor("very fast") == 1.0
+    with pytest.raises(ValueError, match="warp"):
+        motion.speed_factor("warp")
+
+
+def test_limits_must_be_positive():
+    with pytest.raises(ValueError):
+        Limits(0.0, 1.0)
+
+
+def test_map_pose_is_odometry_composed_with_start_pose():
+    odom = {"pose": {"pose": {"position": {"x": 1.0, "y": 0.0}, "orientation": motion.quaternion(0.0)}}}
+    x, y, yaw = motion.map_pose(odom, [2.0, 1.0, math.pi / 2])
+    assert (x, y, yaw) == pytest.approx((2.0, 2.0, math.pi / 2))
+    assert motion.map_pose(odom, []) == pytest.approx((1.0, 0.0, 0.0))
+
+
+def test_velocity_messages_per_type_and_ros_version():
+    assert motion.velocity_message(0.1, 0.2, "geometry_msgs/Twist", 1) == motion.twist(0.1, 0.2)
+    ros1 = motion.velocity_message(0.1, 0.2, "geometry_msgs/TwistStamped", 1, 12.5)
+    assert ros1["header"]["stamp"] == {"secs": 12, "nsecs": 500000000}
+    assert ros1["twist"]["angular"]["z"] == 0.2
+    ros2 = motion.velocity_message(0.1, 0.2, "geometry_msgs/msg/TwistStamped", 2, 12.5)
+    assert ros2["header"]["stamp"] == {"sec": 12, "nanosec": 500000000}
+    with pytest.raises(ValueError, match="PoseStamped"):
+        motion.velocity_message(0.1, 0.2, "geometry_msgs/PoseStamped", 1)
+
+
+def test_navigation_goal_messages():
+    goal = motion.move_base_goal(1.0, 2.0, math.pi, "g1", 3.0)
+    assert goal["goal_id"]["id"] == "g1"
+    assert goal["goal"]["target_pose"]["pose"]["position"] == {"x": 1.0, "y": 2.0, "z": 0.0}
+    assert goal["goal"]["target_pose"]["header"]["frame_id"] == "map"
+    nav2 = motion.navigate_to_pose_goal(1.0, 2.0, 0.0, 3.0)
+    assert nav2["pose"]["header"]["stamp"] == {"sec": 3, "nanosec": 0}
+    status = {"status_list": [{"goal_id": {"id": "g0"}, "status": 3}, {"goal_id": {"id": "g1"}, "status": 1}]}
+    assert motion.move_base_outcome(status, "g1") == "active"
+    assert motion.move_base_outcome(status, "g0") == "succeeded"
+    assert motion.move_base_outcome(status, "g9") is None

@@ -1,0 +1,81 @@
+"""The per-robot state machine of the paper's Figures 5 and 6, as a table."""
+
+import pytest
+
+from fleet.statemachine import (
+    PRIORITY,
+    Admission,
+    Event,
+    IllegalTransition,
+    State,
+    activity_priority,
+    admit,
+    can,
+    next_state,
+)
+
+
+def test_the_paper_cycle_registered_ready_dialog_motion_work_ready():
+    state = State.REGISTERED
+    for event, expected in [
+        (Event.LINK_UP, State.READY),
+        (Event.ASK, State.DIALOG),
+        (Event.MOVE, State.MOTION),
+        (Event.WORK, State.WORK),
+        (Event.DONE, State.READY),
+    ]:
+        state = next_state(state, event)
+        assert state == expected
+
+
+@pytest.mark.parametrize("state", [State.READY, State.DIALOG, State.MOTION, State.WORK, State.REGISTERED])
+def test_link_down_makes_any_state_offline(state):
+    assert next_state(state, Event.LINK_DOWN) == State.OFFLINE
+
+
+def test_idle_timeout_only_from_ready():
+    assert next_state(State.READY, Event.IDLE_TIMEOUT) == State.OFFLINE
+    assert not can(State.MOTION, Event.IDLE_TIMEOUT)
+    assert not can(State.WORK, Event.IDLE_TIMEOUT)
+
+
+def test_offline_robot_comes_back_only_through_link_up():
+    assert next_state(State.OFFLINE, Event.LINK_UP) == State.READY
+    for event in (Event.MOVE, Event.WORK, Event.ASK, Event.DONE):
+        assert not can(State.OFFLINE, event)
+
+
+def test_illegal_transition_names_state_and_event():
+    with pytest.raises(IllegalTransition, match="'ready'.*'done'"):
+        next_state(State.READY, Event.DONE)
+    with pytest.raises(IllegalTransition):
+        next_state("flying", Event.DONE)
+    with pytest.raises(IllegalTransition):
+        next_state(State.READY, "teleport")
+
+
+def test_priorities_work_over_motion_over_dialog_over_ready():
+    assert PRIORITY[State.WORK] > PRIORITY[State.MOTION] > PRIORITY[State.DIALOG] > PRIORITY[State.READY]
+
+
+def test_step_priorities():
+    assert activity_priority([{"destination": {"x": 1, "y": 2}}]) == PRIORITY[State.MOTION]
+    assert activity_priority([{"destination": None, "task": "rotate(5)"}]) == PRIORITY[State.WORK]
+    assert activity_priority([{"destination": {"x": 1, "y": 2}}, {"task": "clean"}]) == PRIORITY[State.WORK]
+    assert activity_priority([]) == PRIORITY[State.READY]
+
+
+@pytest.mark.parametrize(
+    ("state", "priority", "expected"),
+    [
+        (State.READY, PRIORITY[State.MOTION], Admission.START),
+        (State.MOTION, PRIORITY[State.WORK], Admission.PREEMPT),  # a work instruction preempts a motion
+        (State.MOTION, PRIORITY[State.MOTION], Admission.QUEUE),  # equal priority waits
+        (State.WORK, PRIORITY[State.MOTION], Admission.QUEUE),
+        (State.WORK, PRIORITY[State.WORK], Admission.QUEUE),
+        (State.DIALOG, PRIORITY[State.MOTION], Admission.PREEMPT),
+        (State.OFFLINE, PRIORITY[State.WORK], Admission.REFUSE),
+    ],
+)
+def test_admission_preempts_only_lower_priority(state, priority, expected):
+    assert admit(state, priority) == expected
