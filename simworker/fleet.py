@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 import time
 from collections.abc import Callable, Iterable
@@ -119,6 +120,8 @@ class SimFleet:
     async def run(self, on_ready: Callable[[SimFleet], None] | None = None) -> None:
         """Start the servers, run the physics in real time until request_stop(), then close."""
         await self.start()
+        gc.collect()
+        gc.freeze()  # the world's long-lived objects leave the collector's scans: shorter pauses
         try:
             if on_ready is not None:
                 on_ready(self)

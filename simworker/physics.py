@@ -82,20 +82,20 @@ class RobotBody:
         self.vx += _clamp(tx - self.vx, -dv, dv)
         self.vy += _clamp(ty - self.vy, -dv, dv)
         self.wz += _clamp(tw - self.wz, -dw, dw)
-        c, s = math.cos(body.angle), math.sin(body.angle)
+        c, s = body.rotation_vector
         body.velocity = (self.vx * c - self.vy * s, self.vx * s + self.vy * c)
         body.angular_velocity = self.wz
 
     def pose(self) -> tuple[float, float, float]:
         """Return the ground-truth pose (x, y, yaw) of base_footprint in the map frame."""
         x, y = self.body.position
-        yaw = math.atan2(math.sin(self.body.angle), math.cos(self.body.angle))
-        return x, y, yaw
+        c, s = self.body.rotation_vector
+        return x, y, math.atan2(s, c)
 
     def twist(self) -> tuple[float, float, float]:
         """Return the measured body-frame velocity (vx, vy, wz)."""
         vx, vy = self.body.velocity
-        c, s = math.cos(self.body.angle), math.sin(self.body.angle)
+        c, s = self.body.rotation_vector
         return vx * c + vy * s, -vx * s + vy * c, self.body.angular_velocity
 
 

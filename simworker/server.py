@@ -27,7 +27,8 @@ log = logging.getLogger("simworker.server")
 MAX_MESSAGE_SIZE = 10_000_000  # rosbridge's max_message_size; bigger frames close the connection (1009)
 SEND_QUEUE = 1000  # messages waiting for one client; older ones are dropped beyond this
 STALL_SECONDS = 5.0  # a client that accepts no data for this long is disconnected
-FLOOD_RATE = 2000.0  # incoming messages per second per client before the excess is dropped
+FLOOD_RATE = 2000.0  # publish ops per second per client before the excess is dropped
+WRITE_BATCH = 256  # frames joined into one socket write
 BRIDGE_NODE = "/rosbridge_websocket"
 
 
@@ -94,22 +95,33 @@ class Client:
         return True
 
     async def writer(self) -> None:
-        """Send queued frames in order until the connection closes."""
+        """Send queued frames in order until the connection closes; cut off a client that stops reading."""
         while True:
             if not self.queue:
                 self.wake.clear()
                 await self.wake.wait()
                 continue
-            text, sub = self.queue.popleft()
-            if sub is not None:
-                sub.queued -= 1
+            batch = []
+            while self.queue and len(batch) < WRITE_BATCH:
+                text, sub = self.queue.popleft()
+                if sub is not None:
+                    sub.queued -= 1
+                batch.append(text)
             try:
                 async with asyncio.timeout(STALL_SECONDS):
-                    await self.ws.send(text)
+                    await self._write(batch)
             except TimeoutError:
                 log.warning("client %s stopped reading; closing its connection", self.ws.remote_address)
                 self.ws.transport.abort()
                 return
+
+    async def _write(self, batch: list[str]) -> None:
+        """Write frames with one socket write: websockets' send_context pattern, frames joined."""
+        ws = self.ws
+        async with ws.send_context():
+            for text in batch:
+                ws.protocol.send_text(text.encode())
+            ws.transport.write(b"".join(ws.protocol.data_to_send()))
 
 
 class RosbridgeServer:
@@ -193,10 +205,7 @@ class RosbridgeServer:
         writer = asyncio.create_task(client.writer())
         try:
             async for raw in ws:
-                if client.allow():
-                    self.dispatch(client, raw)
-                else:
-                    client.dropped += 1
+                self.dispatch(client, raw)
                 await asyncio.sleep(0)  # let the physics and other clients run between messages
         except ConnectionClosed:
             pass
@@ -235,6 +244,9 @@ class RosbridgeServer:
             handler = self.ops.get(op) if isinstance(op, str) else None
             if handler is None:
                 raise BadMessage(f"Unknown operation: {op}.  Allowed operations: {sorted(self.ops)}")
+            if op == "publish" and not client.allow():
+                client.dropped += 1  # a publish flood: the excess is dropped
+                return
             handler(client, msg)
         except (BadMessage, ValueError, UnicodeDecodeError) as exc:
             log.info("%s: dropped message: %s", self.key, exc)
