@@ -6,7 +6,7 @@ if (form) {
   const stopAll = async (event) => {
     if (event) event.preventDefault();
     try {
-      const reply = await request(form.action, { robots: "all" });
+      const reply = await request(form.getAttribute("action"), { robots: "all" });
       toast(reply.detail);
     } catch (error) {
       toast(`Stop refused: ${error.message}`, true);

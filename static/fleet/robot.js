@@ -48,7 +48,7 @@ const live = connectLive(`/ws/robots/${robotId}/`, {
 document.querySelectorAll(".lease-form").forEach((form) => form.addEventListener("submit", async (event) => {
   event.preventDefault();
   try {
-    const reply = await request(form.action, { action: form.querySelector("[name=action]").value });
+    const reply = await request(form.getAttribute("action"), { action: form.querySelector("[name=action]").value });
     showHolder(reply.holder);
     toast(reply.detail);
   } catch (error) { toast(error.message, true); }

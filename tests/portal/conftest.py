@@ -44,3 +44,87 @@ def fleet(db, small_map):
         robot=turtlebot, start="08:00", end="10:00", goal=small_map.locations.get(name="A"), task="rotate(5)"
     )
     return {"turtlebot": turtlebot, "husky": husky}
+
+
+# --- browser tests: the ASGI app served by uvicorn in a thread of this process, on the test database ---------
+
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]  # fmt: skip
+
+
+def chromium_path():
+    import os
+    from pathlib import Path
+
+    path = os.environ.get("FLEET_CHROMIUM", "/usr/bin/chromium")
+    return path if Path(path).exists() else None
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture
+def live_url(transactional_db):
+    """The whole portal (HTTP and WebSockets) on a free port; the test's committed rows are what it serves."""
+    import threading
+    import time
+
+    import uvicorn
+
+    from fleet.asgi import application
+
+    port = _free_port()
+    config = uvicorn.Config(application, host="127.0.0.1", port=port, log_level="warning", lifespan="off")
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 10
+    while not server.started:
+        if time.monotonic() > deadline or not thread.is_alive():
+            raise RuntimeError("uvicorn did not start")
+        time.sleep(0.05)
+    yield f"http://127.0.0.1:{port}"
+    server.should_exit = True
+    thread.join(timeout=10)
+
+
+@pytest.fixture
+def browser(monkeypatch):
+    """Debian's chromium, headless, driven by Playwright (skipped where it is not installed)."""
+    path = chromium_path()
+    if path is None:
+        pytest.skip("no chromium at /usr/bin/chromium (set FLEET_CHROMIUM)")
+    # Playwright's sync API keeps an event loop in this thread; the test's own ORM calls are still sync.
+    monkeypatch.setenv("DJANGO_ALLOW_ASYNC_UNSAFE", "true")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        chromium = playwright.chromium.launch(executable_path=path, args=CHROMIUM_ARGS)
+        yield chromium
+        chromium.close()
+
+
+@pytest.fixture
+def login(browser, live_url):
+    """Open a fresh browser context logged in as the given user (through the login form); return its page."""
+    from tests.conftest import PASSWORD
+
+    def _login(user, width: int = 1280, height: int = 900):
+        context = browser.new_context(viewport={"width": width, "height": height})
+        page = context.new_page()
+        page.set_default_timeout(15000)
+        page.goto(f"{live_url}/login/")
+        page.get_by_label("Username").fill(user.username)
+        page.get_by_label("Password").fill(PASSWORD)
+        page.get_by_role("button", name="Log in").click()
+        page.wait_for_url(f"{live_url}/")
+        return page
+
+    return _login

@@ -1,0 +1,75 @@
+"""The portal in a real browser (Playwright driving Debian's chromium against a live ASGI server)."""
+
+import pytest
+
+from fleet import leases
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(90)]
+
+
+def _live(page):
+    """Wait until the page's WebSocket delivered its snapshot."""
+    page.wait_for_selector("#conn[data-state=live]")
+
+
+def test_viewer_has_no_control(login, viewer, fleet, live_url):
+    page = login(viewer)
+    _live(page)
+    assert page.locator("#stop-all").count() == 0
+    assert page.get_by_label("Instruction", exact=True).count() == 0
+    page.wait_for_selector("#robot-table tr[data-name=turtlebot] .state[data-state=ready]")
+    assert "● ready" in page.locator("#robot-table tr[data-name=turtlebot] .state").inner_text()
+    page.goto(f"{live_url}/robots/{fleet['turtlebot'].pk}/")
+    _live(page)
+    assert page.get_by_role("button", name="Take control").count() == 0
+    assert page.get_by_role("group", name="Teleoperation").count() == 0
+    # and the server refuses the viewer's stop even when sent by hand over the page's own socket
+    page.evaluate(
+        "() => { window.__replies = []; const s = new WebSocket(`ws://${location.host}/ws/fleet/`);"
+        " s.onmessage = (e) => window.__replies.push(JSON.parse(e.data));"
+        " s.onopen = () => s.send(JSON.stringify({command: 'stop', robots: 'all'})); }"
+    )
+    page.wait_for_function("() => window.__replies.some((m) => m.type === 'command.result')")
+    reply = page.evaluate("() => window.__replies.find((m) => m.type === 'command.result')")
+    assert reply["ok"] is False and "may only view" in reply["detail"]
+
+
+def test_second_operator_cannot_command_a_robot_held_by_the_first(
+    login, operator, second_operator, fleet, live_url
+):
+    robot = fleet["turtlebot"]
+    first = login(operator)
+    first.goto(f"{live_url}/robots/{robot.pk}/")
+    _live(first)
+    first.get_by_role("button", name="Take control").click()
+    first.wait_for_selector("#holder[data-holder=otto]")
+
+    second = login(second_operator)
+    second.goto(f"{live_url}/robots/{robot.pk}/")
+    _live(second)
+    assert second.locator("#holder").inner_text() == "held by otto"
+    second.get_by_role("button", name="Take control").click()
+    second.wait_for_selector(".toast.bad:has-text('held by otto')")
+    second.get_by_role("button", name="Forward").dispatch_event("pointerdown")
+    second.wait_for_selector(".toast.bad:has-text('held by otto')")
+    assert leases.holder(robot) == operator
+
+
+def test_operator_sees_the_lease_taken_elsewhere_live(login, operator, second_operator, fleet, live_url):
+    robot = fleet["turtlebot"]
+    watcher = login(second_operator)
+    _live(watcher)
+    page = login(operator)
+    page.goto(f"{live_url}/robots/{robot.pk}/")
+    _live(page)
+    page.get_by_role("button", name="Take control").click()
+    watcher.wait_for_selector("#robot-table tr[data-name=turtlebot] .held:has-text('held by otto')")
+
+
+def test_usable_on_a_768px_tablet(login, operator, fleet):
+    page = login(operator, width=768, height=1024)
+    _live(page)
+    assert page.locator("#stop-all").is_visible()
+    assert page.get_by_label("Instruction", exact=True).is_visible()
+    overflow = page.evaluate("() => document.documentElement.scrollWidth - window.innerWidth")
+    assert overflow <= 0
