@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import logging
 
-from django.db import transaction
 from django.utils import timezone
 
 from fleet import live
@@ -15,25 +14,31 @@ from robots.models import Robot
 log = logging.getLogger(__name__)
 
 
-@transaction.atomic
 def transition(robot: Robot | int, event: str, reason: str = "", instruction=None) -> StateTransition | None:
-    """Apply an event to a robot's state; store and push the transition. None when the event is illegal now."""
+    """Apply an event to a robot's state; store and push the transition. None when the event is illegal now.
+
+    A compare-and-set on the state (no read-then-write transaction), so concurrent runners never interleave.
+    """
     robot_id = robot if isinstance(robot, int) else robot.pk
-    current = Robot.objects.select_for_update().get(pk=robot_id)
-    try:
-        to_state = next_state(current.state, event)
-    except IllegalTransition as exc:
-        log.info("%s: %s (%s)", current.name, exc, reason)
-        return None
-    return _store(current, to_state, reason, instruction)
+    for _ in range(5):
+        current = Robot.objects.get(pk=robot_id)
+        try:
+            to_state = next_state(current.state, event)
+        except IllegalTransition as exc:
+            log.info("%s: %s (%s)", current.name, exc, reason)
+            return None
+        if Robot.objects.filter(pk=robot_id, state=current.state).update(state=to_state):
+            return _store(current, to_state, reason, instruction)
+    return None
 
 
-@transaction.atomic
 def force(robot: Robot | int, to_state: str, reason: str, instruction=None) -> StateTransition | None:
-    """Set a state whatever the current one (recovery after a lost worker); None if already there."""
+    """Set a state whatever the current one (recovery); None if already there."""
     robot_id = robot if isinstance(robot, int) else robot.pk
-    current = Robot.objects.select_for_update().get(pk=robot_id)
-    if current.state == to_state:
+    current = Robot.objects.get(pk=robot_id)
+    if current.state == to_state or not Robot.objects.filter(pk=robot_id, state=current.state).update(
+        state=to_state
+    ):
         return None
     return _store(current, to_state, reason, instruction)
 
@@ -47,7 +52,6 @@ def _store(robot: Robot, to_state: str, reason: str, instruction) -> StateTransi
         reason=reason[:255],
         instruction_id=instruction if isinstance(instruction, int) else getattr(instruction, "pk", None),
     )
-    Robot.objects.filter(pk=robot.pk).update(state=to_state)
     robot.state = to_state
     live.transition(robot, record)
     live.robot_status(robot)

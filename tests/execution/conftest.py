@@ -15,6 +15,8 @@ def pytest_configure(config):
     db = settings.DATABASES["default"]
     if db["ENGINE"].endswith("sqlite3") and not db.get("TEST", {}).get("NAME"):
         db.setdefault("TEST", {})["NAME"] = f"/tmp/fleet-test-{os.getpid()}.sqlite3"
+        # Many runner threads write at once: take the write lock at BEGIN, not on the first write.
+        db.setdefault("OPTIONS", {}).setdefault("transaction_mode", "IMMEDIATE")
 
 
 @pytest.fixture
@@ -50,4 +52,12 @@ def turtle_world(exec_settings, transactional_db):
     """The paper world with the turtlebot endpoint registered."""
     with running_world("paper", endpoints=["turtlebot"]) as sim:
         sim.robots = register(sim, ["turtlebot"])
+        yield sim
+
+
+@pytest.fixture
+def demo_world(exec_settings, transactional_db):
+    """The paper world's demo fleet: robot1..4, turtlebot, husky and tiago, registered; twice real time."""
+    with running_world("paper", endpoints=["robots", "turtlebot", "husky", "tiago"], time_scale=2.0) as sim:
+        sim.robots = register(sim, ["robots", "turtlebot", "husky", "tiago"])
         yield sim

@@ -46,7 +46,7 @@ def test_offline_robot_comes_back_only_through_link_up():
 
 
 def test_illegal_transition_names_state_and_event():
-    with pytest.raises(IllegalTransition, match="'ready'.*'done'"):
+    with pytest.raises(IllegalTransition, match=r"'ready'.*'done'"):
         next_state(State.READY, Event.DONE)
     with pytest.raises(IllegalTransition):
         next_state("flying", Event.DONE)
