@@ -24,6 +24,15 @@ class LoopThread:
         self.loop = asyncio.new_event_loop()
         self.thread = threading.Thread(target=self.loop.run_forever, name="rosbridge-loop", daemon=True)
         self.thread.start()
+        self.clients: dict[str, SyncClient] = {}
+        self.lock = threading.Lock()
+
+    def client(self, url: str) -> SyncClient:
+        """The shared client for url, created on first use."""
+        with self.lock:
+            if url not in self.clients:
+                self.clients[url] = SyncClient(self, url)
+            return self.clients[url]
 
     def run(self, coro, timeout: float | None = None):
         """Run a coroutine on the loop and wait for its result."""
@@ -73,6 +82,10 @@ class SyncClient:
         self._run(self.client.cancel_action_goal(goal))
 
     def close(self) -> None:
+        """Close the link; the next get_client(url) opens a new one."""
+        with self.runner.lock:
+            if self.runner.clients.get(self.url) is self:
+                del self.runner.clients[self.url]
         self._run(self.client.close())
 
 
@@ -81,11 +94,6 @@ def _runner(pid: int) -> LoopThread:
     return LoopThread()
 
 
-@cache
-def _client(pid: int, url: str) -> SyncClient:
-    return SyncClient(_runner(pid), url)
-
-
 def get_client(url: str) -> SyncClient:
     """Return this process's shared SyncClient for url (created and connected on first use)."""
-    return _client(os.getpid(), url)
+    return _runner(os.getpid()).client(url)

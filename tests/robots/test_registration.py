@@ -166,3 +166,13 @@ def test_api_register_inline_needs_the_register_permission(endpoint, client_for,
     ok = client_for(fleet_admin).post("/api/robots/register", body, content_type="application/json")
     assert ok.status_code == 200
     assert ok.json()["results"][0]["robots"] == ["fakebot"]
+
+
+def test_an_endpoint_with_1200_topics_registers(endpoint):
+    from tests.robots.fakes import big_graph
+
+    ep = endpoint(build=big_graph)
+    (result,) = register_endpoints([ep.url])
+    robot = Robot.objects.get(name="bigbot")
+    assert result.ok and robot.topics.count() == 1200
+    assert (bound(robot, "move"), bound(robot, "odometry")) == ("/cmd_vel", "/odom")
