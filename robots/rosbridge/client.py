@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import socket
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -62,6 +63,15 @@ class ActionGoal:
             return await asyncio.wait_for(asyncio.shield(self.result), timeout)
         except TimeoutError:
             raise RosbridgeTimeout(f"{self.action}: no action result within {timeout:g} s") from None
+
+
+def _os_reason(exc: OSError) -> str:
+    """A short reason for a failed connect: refused, unknown host, or the OS's words."""
+    if isinstance(exc, ConnectionRefusedError) or "Connect call failed" in str(exc):
+        return "connection refused"
+    if isinstance(exc, socket.gaierror):
+        return "unknown host"
+    return exc.strerror or str(exc)
 
 
 class RosbridgeClient:
@@ -186,7 +196,7 @@ class RosbridgeClient:
                 f"{self.url}: no WebSocket handshake within {self.connect_timeout:g} s"
             ) from None
         except OSError as exc:
-            raise UnreachableError(f"{self.url}: unreachable ({exc.strerror or exc})") from None
+            raise UnreachableError(f"{self.url}: unreachable ({_os_reason(exc)})") from None
 
     async def _supervise(self) -> None:
         delay = self.min_backoff
