@@ -61,3 +61,14 @@ def demo_world(exec_settings, transactional_db):
     with running_world("paper", endpoints=["robots", "turtlebot", "husky", "tiago"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["robots", "turtlebot", "husky", "tiago"])
         yield sim
+
+
+@pytest.fixture
+def table12_world(exec_settings, transactional_db):
+    """Turtlebot, husky and tiago registered, with the paper's Table 12 time slots enabled."""
+    from fleet.models import TimeSlot
+
+    with running_world("paper", endpoints=["turtlebot", "husky", "tiago"]) as sim:
+        sim.robots = register(sim, ["turtlebot", "husky", "tiago"])
+        TimeSlot.objects.update(enabled=True)
+        yield sim
