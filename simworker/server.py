@@ -28,6 +28,8 @@ MAX_MESSAGE_SIZE = 10_000_000  # rosbridge's max_message_size; bigger frames clo
 SEND_QUEUE = 1000  # messages waiting for one client; older ones are dropped beyond this
 STALL_SECONDS = 5.0  # a client that accepts no data for this long is disconnected
 FLOOD_RATE = 2000.0  # publish ops per second per client before the excess is dropped
+SERVICE_TIMEOUT = 10.0  # a client-provided service that does not answer fails after this
+MAX_FRAGMENTS = 10_000
 WRITE_BATCH = 256  # frames joined into one socket write
 BRIDGE_NODE = "/rosbridge_websocket"
 
@@ -65,6 +67,9 @@ class Client:
         self.dropped = 0
         self.tokens, self.token_time = FLOOD_RATE, time.monotonic()
         self.connected_at = time.time()
+        self.provided: set[str] = set()  # services this client advertised
+        self.pending: dict[str, asyncio.Future] = {}  # forwarded calls awaiting its service_response
+        self.fragments: dict[str, dict[int, str]] = {}
 
     def send(self, text: str, sub: Subscription | None = None) -> None:
         """Queue a frame for the writer; drop the oldest when the queue is full."""
@@ -144,12 +149,17 @@ class RosbridgeServer:
             "subscribe": self._subscribe,
             "unsubscribe": self._unsubscribe,
             "call_service": self._call_service,
+            "advertise_service": self._advertise_service,
+            "unadvertise_service": self._unadvertise_service,
+            "service_response": self._service_response,
+            "fragment": self._fragment,
         }
         if graph.ros_version == 2:
             self.ops.update(
                 send_action_goal=self._send_action_goal, cancel_action_goal=self._cancel_action_goal
             )
         self.goals: dict[str, ActionGoal] = {}
+        self._tasks: set[asyncio.Task] = set()
 
     # ----- lifecycle -----
     async def start(self, host: str) -> None:
@@ -221,6 +231,10 @@ class RosbridgeServer:
             self._remove_advert(client, topic)
         for goal_id in [g for g, goal in self.goals.items() if goal.client is client]:
             self.goals.pop(goal_id).cancel()
+        for service in list(client.provided):
+            self._remove_service(client, service)
+        for future in client.pending.values():
+            future.cancel()
         self._client_topics()
 
     def _client_topics(self) -> None:
@@ -359,7 +373,77 @@ class RosbridgeServer:
         except ServiceError as exc:
             client.send(json.dumps({**reply, "values": str(exc), "result": False}))
             return
+        if isinstance(values, asyncio.Future):
+            task = asyncio.ensure_future(self._finish_call(client, reply, values))
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+            return
         client.send(json.dumps({**reply, "values": values, "result": True}))
+
+    async def _finish_call(self, client: Client, reply: dict, pending: asyncio.Future) -> None:
+        """Relay the answer of a client-provided service (or its failure) to the caller."""
+        try:
+            async with asyncio.timeout(SERVICE_TIMEOUT):
+                values = await pending
+            client.send(json.dumps({**reply, "values": values, "result": True}))
+        except (ServiceError, TimeoutError, asyncio.CancelledError) as exc:
+            text = str(exc) or f"Service {reply['service']} did not answer"
+            client.send(json.dumps({**reply, "values": text, "result": False}))
+
+    def _advertise_service(self, client: Client, msg: dict) -> None:
+        service, type_ = _field(msg, "service", str), _field(msg, "type", str)
+        counter = iter(range(1, 1 << 62))
+
+        def forward(args: dict) -> asyncio.Future:
+            call_id = f"service_request:{service}:{next(counter)}"
+            future = asyncio.get_running_loop().create_future()
+            client.pending[call_id] = future
+            client.send(json.dumps({"op": "call_service", "id": call_id, "service": service, "args": args}))
+            return future
+
+        client.provided.add(service)
+        self.graph.add_service(
+            BRIDGE_NODE, service, self.graph.msg_type(type_).replace("/msg/", "/srv/"), forward
+        )
+
+    def _unadvertise_service(self, client: Client, msg: dict) -> None:
+        service = _field(msg, "service", str)
+        if service in client.provided:
+            self._remove_service(client, service)
+
+    def _remove_service(self, client: Client, service: str) -> None:
+        client.provided.discard(service)
+        self.graph.node(BRIDGE_NODE).services.discard(service)
+        self.graph.service_types.pop(service, None)
+        self.graph.service_handlers.pop(service, None)
+
+    def _service_response(self, client: Client, msg: dict) -> None:
+        _field(msg, "service", str)
+        ok = _field(msg, "result", bool)
+        future = client.pending.pop(str(msg.get("id")), None)
+        if future is None or future.done():
+            raise BadMessage(f"service_response: no pending request with id {msg.get('id')}")
+        values = msg.get("values", {})
+        if ok:
+            future.set_result(values if isinstance(values, dict) else {})
+        else:
+            future.set_exception(ServiceError(str(values)))
+
+    def _fragment(self, client: Client, msg: dict) -> None:
+        """Reassemble a fragmented message and dispatch it once all parts arrived."""
+        frag_id = str(_field(msg, "id", (str, int)))
+        data, num, total = (
+            _field(msg, "data", str),
+            _field(msg, "num", int),
+            _field(msg, "total", (int, float)),
+        )
+        if not 0 <= num < total <= MAX_FRAGMENTS:
+            raise BadMessage(f"fragment: bad num/total {num}/{total}")
+        parts = client.fragments.setdefault(frag_id, {})
+        parts[num] = data
+        if len(parts) >= int(total):
+            del client.fragments[frag_id]
+            self.dispatch(client, "".join(parts[i] for i in sorted(parts)))
 
     def _send_action_goal(self, client: Client, msg: dict) -> None:
         action = _field(msg, "action", str)
@@ -428,10 +512,11 @@ def _field(msg: dict, name: str, type_: type, required: bool = True):
             raise BadMessage(f"{msg.get('op')}: Expected a {name} field but none was found.")
         return None
     value = msg[name]
-    if not isinstance(value, type_) or (type_ is int and isinstance(value, bool)):
+    types = type_ if isinstance(type_, tuple) else (type_,)
+    if not isinstance(value, types) or (bool not in types and isinstance(value, bool)):
+        names = ", ".join(t.__name__ for t in types)
         raise BadMessage(
-            f"{msg.get('op')}: Expected field {name} to be one of ({type_.__name__}). "
-            f"Invalid value: {value!r}"[:300]
+            f"{msg.get('op')}: Expected field {name} to be one of ({names}). Invalid value: {value!r}"[:300]
         )
     return value
 

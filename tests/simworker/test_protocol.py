@@ -1,0 +1,107 @@
+"""rosbridge v2 behaviour of an endpoint: echo, throttle, unsubscribe, params, client services, fragments."""
+
+import json
+import time
+
+import pytest
+
+pytestmark = pytest.mark.timeout(60)
+TWIST = {"linear": {"x": 0.0, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.3}}
+
+
+def test_a_published_twist_is_echoed_to_other_subscribers_without_id_or_type(world, bridge):
+    pub, sub = bridge(world.urls["tiago"]), bridge(world.urls["tiago"])
+    sub.send("subscribe", topic="/key_vel", type="geometry_msgs/Twist", id="s")
+    sub.call("/rosapi/get_time")  # the subscription is in place once this answers
+    pub.send("advertise", topic="/key_vel", type="geometry_msgs/Twist", id="a")
+    pub.send("publish", topic="/key_vel", msg=TWIST, id="p")
+    echoed = sub.wait_for(lambda m: m.get("topic") == "/key_vel", timeout=5)
+    assert echoed == {"op": "publish", "topic": "/key_vel", "msg": TWIST}
+    assert (
+        "/rosbridge_websocket"
+        in pub.call("/rosapi/publishers", {"topic": "/key_vel"})["values"]["publishers"]
+    )
+    assert "/twist_mux" in pub.call("/rosapi/subscribers", {"topic": "/key_vel"})["values"]["subscribers"]
+
+
+def test_throttle_rate_limits_and_unsubscribe_stops_messages(world, bridge):
+    client = bridge(world.urls["turtlebot"])
+    client.send("subscribe", topic="/odom", id="slow", throttle_rate=500)
+    start = time.monotonic()
+    stamps = [client.wait_for(lambda m: m.get("topic") == "/odom") for _ in range(3)]
+    assert time.monotonic() - start > 0.9  # three messages at most 2 per second
+    assert len({json.dumps(m["msg"]["header"]) for m in stamps}) == 3
+    client.send("unsubscribe", topic="/odom", id="slow")
+    client.call("/rosapi/get_time")
+    with pytest.raises(TimeoutError):
+        client.wait_for(lambda m: m.get("topic") == "/odom", timeout=0.5)
+
+
+def test_ros1_params_get_set_has_and_namespaces(world, bridge):
+    client = bridge(world.urls["robots"])
+    tree = json.loads(client.call("/rosapi/get_param", {"name": "/robot1"})["values"]["value"])
+    assert tree["robot_description"].startswith("<?xml") and tree["move_base"]["controller_frequency"] == 10.0
+    assert client.call("/rosapi/set_param", {"name": "/demo/speed", "value": "0.5"})["result"] is True
+    assert client.call("/rosapi/get_param", {"name": "/demo/speed"})["values"]["value"] == "0.5"
+    assert client.call("/rosapi/has_param", {"name": "/demo/speed"})["values"]["exists"] is True
+    missing = client.call("/rosapi/get_param", {"name": "/nope", "default": "3"})
+    assert missing["values"]["value"] == "3"
+    assert "/robot4/robot_description" in client.call("/rosapi/get_param_names")["values"]["names"]
+
+
+def test_ros2_endpoint_speaks_ros2(world, bridge):
+    client = bridge(world.urls["tb3_nav2"])
+    assert client.call("/rosapi/get_time")["values"]["time"].keys() == {"sec", "nanosec"}
+    assert client.call("/rosapi/get_ros_version")["values"] == {"version": 2, "distro": "humble"}
+    names = client.call("/rosapi/get_param_names")["values"]["names"]
+    assert "/robot_state_publisher:robot_description" in names
+    assert "/turtlebot3_node/get_parameters" in client.call("/rosapi/services")["values"]["services"]
+    assert client.call("/rosapi/topic_type", {"topic": "/odom"})["values"]["type"] == "nav_msgs/msg/Odometry"
+    client.send("subscribe", topic="/odom", id="o")
+    odom = client.wait_for(lambda m: m.get("topic") == "/odom")["msg"]
+    assert odom["header"]["stamp"].keys() == {"sec", "nanosec"} and "seq" not in odom["header"]
+
+
+def test_client_count_is_latched_and_infrastructure_is_listed(world, bridge):
+    client = bridge(world.urls["husky"])
+    client.send("subscribe", topic="/client_count", id="c")
+    assert client.wait_for(lambda m: m.get("topic") == "/client_count")["msg"]["data"] >= 1
+    values = client.call("/rosapi/topics_for_type", {"type": "nav_msgs/Odometry"})["values"]
+    assert {"/odometry/filtered", "/husky_velocity_controller/odom"} <= set(values["topics"])
+    services = client.call("/rosapi/services")["values"]["services"]
+    assert {"/move_base/make_plan", "/twist_mux/get_loggers", "/rosapi/get_param"} <= set(services)
+
+
+def test_client_advertised_service_is_forwarded_and_answered(world, bridge):
+    provider, caller = bridge(world.urls["spot"]), bridge(world.urls["spot"])
+    provider.send("advertise_service", service="/my_service", type="std_srvs/Trigger")
+    provider.call("/rosapi/get_time")
+    caller.send("call_service", service="/my_service", args={}, id="c1")
+    request = provider.wait_for(lambda m: m.get("op") == "call_service")
+    assert request["service"] == "/my_service" and request["id"].startswith("service_request:/my_service:")
+    provider.send(
+        "service_response",
+        service="/my_service",
+        id=request["id"],
+        result=True,
+        values={"success": True, "message": "done"},
+    )
+    answer = caller.wait_for(lambda m: m.get("op") == "service_response")
+    assert answer == {
+        "op": "service_response",
+        "service": "/my_service",
+        "id": "c1",
+        "values": {"success": True, "message": "done"},
+        "result": True,
+    }
+    provider.send("unadvertise_service", service="/my_service")
+    assert caller.call("/my_service")["result"] is False
+
+
+def test_fragments_are_reassembled(world, bridge):
+    client = bridge(world.urls["turtlebot"])
+    text = json.dumps({"op": "call_service", "service": "/rosapi/get_time", "id": "frag"})
+    parts = [text[i : i + 10] for i in range(0, len(text), 10)]
+    for num, data in reversed(list(enumerate(parts))):
+        client.send("fragment", id="f1", data=data, num=num, total=len(parts))
+    assert client.wait_for(lambda m: m.get("id") == "frag")["result"] is True
