@@ -24,6 +24,7 @@ def processes(python: str) -> dict[str, str]:
         "worker": f"{python} -m celery -A fleet worker -Q instructions,control,registration -c 2 -l warning",
         "sim": f"{manage} simworker --world paper",
         "links": f"{manage} robotlinks --register-world paper",
+        "scheduler": f"{manage} scheduler",  # time slots, lost workers, stalled robot queues (issue 6)
     }
     return procs
 
