@@ -269,7 +269,7 @@ class RosbridgeServer:
 
     # ----- ops -----
     def _advertise(self, client: Client, msg: dict) -> None:
-        topic, type_ = _field(msg, "topic", str), _field(msg, "type", str)
+        topic, type_ = _name(msg, "topic"), _field(msg, "type", str)
         known = self.graph.topic_types.get(topic)
         if known and _norm(known) != _norm(type_):
             raise BadMessage(
@@ -282,7 +282,7 @@ class RosbridgeServer:
             self.graph.latched_topics.add(topic)
 
     def _unadvertise(self, client: Client, msg: dict) -> None:
-        topic = _field(msg, "topic", str)
+        topic = _name(msg, "topic")
         ids = client.adverts.get(topic)
         if ids is None:
             return
@@ -296,7 +296,7 @@ class RosbridgeServer:
             self.graph.node(BRIDGE_NODE).pubs.discard(topic)
 
     def _publish(self, client: Client, msg: dict) -> None:
-        topic = _field(msg, "topic", str)
+        topic = _name(msg, "topic")
         body = msg.get("msg", {})
         if not isinstance(body, dict):
             raise BadMessage(f"publish: Expected field msg to be an object. Invalid value: {body!r}")
@@ -316,7 +316,7 @@ class RosbridgeServer:
         self.publish(topic, body)
 
     def _subscribe(self, client: Client, msg: dict) -> None:
-        topic = _field(msg, "topic", str)
+        topic = _name(msg, "topic")
         type_ = _field(msg, "type", str, required=False)
         throttle = _field(msg, "throttle_rate", int, required=False) or 0
         qlen = _field(msg, "queue_length", int, required=False) or 0
@@ -332,7 +332,7 @@ class RosbridgeServer:
             client.send(self.latched[topic])
 
     def _unsubscribe(self, client: Client, msg: dict) -> None:
-        topic = _field(msg, "topic", str)
+        topic = _name(msg, "topic")
         sub = client.subs.get(topic)
         if sub is None:
             return
@@ -349,7 +349,7 @@ class RosbridgeServer:
             self.graph.node(BRIDGE_NODE).subs.discard(topic)
 
     def _call_service(self, client: Client, msg: dict) -> None:
-        service = _field(msg, "service", str)
+        service = _name(msg, "service")
         call_id = msg.get("id")
         if "#" in service and call_id is None:
             service, call_id = service.split("#", 1)
@@ -391,7 +391,7 @@ class RosbridgeServer:
             client.send(json.dumps({**reply, "values": text, "result": False}))
 
     def _advertise_service(self, client: Client, msg: dict) -> None:
-        service, type_ = _field(msg, "service", str), _field(msg, "type", str)
+        service, type_ = _name(msg, "service"), _field(msg, "type", str)
         counter = iter(range(1, 1 << 62))
 
         def forward(args: dict) -> asyncio.Future:
@@ -407,7 +407,7 @@ class RosbridgeServer:
         )
 
     def _unadvertise_service(self, client: Client, msg: dict) -> None:
-        service = _field(msg, "service", str)
+        service = _name(msg, "service")
         if service in client.provided:
             self._remove_service(client, service)
 
@@ -446,7 +446,7 @@ class RosbridgeServer:
             self.dispatch(client, "".join(parts[i] for i in sorted(parts)))
 
     def _send_action_goal(self, client: Client, msg: dict) -> None:
-        action = _field(msg, "action", str)
+        action = _name(msg, "action")
         _field(msg, "action_type", str)
         goal_id = str(msg.get("id") or f"send_action_goal:{action}:{len(self.goals)}")
         args = msg.get("args", {})
@@ -519,6 +519,12 @@ def _field(msg: dict, name: str, type_: type, required: bool = True):
             f"{msg.get('op')}: Expected field {name} to be one of ({names}). Invalid value: {value!r}"[:300]
         )
     return value
+
+
+def _name(msg: dict, key: str) -> str:
+    """Return a graph name resolved as the rosbridge node (namespace /) resolves it: `a/b` is `/a/b`."""
+    name = _field(msg, key, str)
+    return name if name.startswith("/") else "/" + name
 
 
 def _norm(type_: str) -> str:
