@@ -82,6 +82,11 @@ class SimRobot:
         g.latched_topics |= self.iface.latched
         for topic, priority in self.iface.cmd_inputs.items():
             g.on_topic(topic, lambda msg, p=priority: self.on_twist(msg, p))
+        description = f"{self.ns}/robot_description"
+        if g.topic_types.get(description) == "std_msgs/msg/String":  # ROS 2: also a latched topic
+            g.latched_topics.add(description)
+            text = next(v for k, v in self.iface.params.items() if k.endswith(":robot_description"))
+            self.server.publish(description, {"data": text})
 
     # ----- commands -----
     def on_twist(self, msg: dict, priority: int) -> None:
@@ -106,7 +111,11 @@ class SimRobot:
         return self.body.pose()
 
     def odom_pose(self) -> tuple[float, float, float]:
-        """Return the pose in the odom frame (start pose at the origin), plus accumulated drift."""
+        """Return the pose in the odom frame: the body's actual motion since its start pose, plus drift.
+
+        This is what Gazebo's diff drive reports with odometrySource world (TurtleBot3's setting): it follows
+        the simulated body exactly, so a robot held by a wall shows no wheel-slip drift unless noise is on.
+        """
         x, y, yaw = self.body.pose()
         x0, y0, yaw0 = self.start
         c, s = math.cos(-yaw0), math.sin(-yaw0)

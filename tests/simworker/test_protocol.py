@@ -57,6 +57,10 @@ def test_ros2_endpoint_speaks_ros2(world, bridge):
     assert "/robot_state_publisher:robot_description" in names
     assert "/turtlebot3_node/get_parameters" in client.call("/rosapi/services")["values"]["services"]
     assert client.call("/rosapi/topic_type", {"topic": "/odom"})["values"]["type"] == "nav_msgs/msg/Odometry"
+    client.send("subscribe", topic="/robot_description", id="d")
+    assert (
+        "wheel_left_joint" in client.wait_for(lambda m: m.get("topic") == "/robot_description")["msg"]["data"]
+    )
     client.send("subscribe", topic="/odom", id="o")
     odom = client.wait_for(lambda m: m.get("topic") == "/odom")["msg"]
     assert odom["header"]["stamp"].keys() == {"sec", "nanosec"} and "seq" not in odom["header"]
