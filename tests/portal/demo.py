@@ -1,0 +1,52 @@
+"""A running demo fleet for the end-to-end browser tests and the screenshots: simulated world + pose stream."""
+
+import asyncio
+import threading
+from contextlib import contextmanager
+
+DEMO_KEYS = ("robots", "namespaced", "turtlebot", "husky", "tiago")  # "robots": the namespaced endpoint
+
+
+@contextmanager
+def pose_stream():
+    """Stream every registered robot's poses to the browsers (what robotlinks does in `make run`)."""
+    from fleet.poses import PoseHub, follow
+    from robots.models import Robot
+
+    state = {}
+
+    def run():
+        loop = asyncio.new_event_loop()
+        state["loop"] = loop
+        stop = asyncio.Event()
+        state["stop"] = stop
+        robots = list(Robot.objects.prefetch_related("bindings"))
+        loop.run_until_complete(follow(robots, PoseHub(), stop))
+
+    thread = threading.Thread(target=run, name="poses", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        while "stop" not in state and thread.is_alive():
+            thread.join(0.05)
+        if "stop" in state:
+            state["loop"].call_soon_threadsafe(state["stop"].set)
+        thread.join(timeout=10)
+
+
+@contextmanager
+def demo_world():
+    """The paper world running, its map and locations in the database; yields the world handle."""
+    import pytest
+
+    testing = pytest.importorskip("simworker.testing")
+    from fleet.worlds import load_world_into_db
+
+    with testing.running_world("paper") as world:
+        load_world_into_db("paper")
+        yield world
+
+
+def demo_urls(world) -> list[str]:
+    return [world.urls[key] for key in DEMO_KEYS if key in world.urls]
