@@ -49,8 +49,8 @@ def register(sim, keys):
 
 @pytest.fixture
 def turtle_world(exec_settings, transactional_db):
-    """The paper world with the turtlebot endpoint registered."""
-    with running_world("paper", endpoints=["turtlebot"]) as sim:
+    """The paper world with the turtlebot endpoint registered, at twice real time."""
+    with running_world("paper", endpoints=["turtlebot"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["turtlebot"])
         yield sim
 

@@ -5,7 +5,20 @@ from django.core.management import CommandError, call_command
 
 from fleet.models import Instruction, Location
 
-pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow, pytest.mark.usefixtures("seeded_ontology")]
+
+
+@pytest.fixture
+def seeded_ontology(transactional_db):
+    """The interpreter's seed terms (a transactional test before this one flushed the migration's rows)."""
+    import importlib
+
+    from django.apps import apps
+
+    from interpreter import versions
+
+    importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
+    versions.bump_ontology()
 
 
 def test_instruct_wait_prints_transitions_and_outcome(turtle_world, fleet_admin, capsys):

@@ -31,7 +31,7 @@ def at(hhmm: str) -> datetime.datetime:
 
 def test_table_12_slots_start_by_themselves_in_order_on_a_compressed_clock(table12_world):
     assert TimeSlot.objects.filter(enabled=True).count() == 9
-    clock = scheduler.Clock(at("07:59:58"), scale=2400.0)  # two hours in three seconds
+    clock = scheduler.Clock(at("07:59:58"), scale=4800.0)  # two hours in a second and a half
     running_at_once = []
     while clock.now() < at("16:00"):
         scheduler.tick(clock)
