@@ -1,0 +1,163 @@
+"""A fresh, private portal for one benchmark run: temp var dir (SQLite, secret), embedded Redis, uvicorn, Celery.
+
+Nothing is shared with a developer's `make run` or the test suite: every file lives in a temp directory that is
+removed at the end, and Redis listens on a unix socket inside it.
+"""
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+BASE_DIR = Path(__file__).resolve().parent.parent
+BENCH_USER = "bench"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Portal:
+    """Set Django up on a temp database in this process; start the web and worker processes on demand."""
+
+    def __init__(self) -> None:
+        self.tmp = Path(tempfile.mkdtemp(prefix="fleetbench-"))
+        self.socket = self.tmp / "redis.sock"
+        self.port = free_port()
+        self.redis = None
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.env: dict[str, str] = {}
+        self.user = None
+
+    # ----- this process -----
+    def setup(self) -> "Portal":
+        """Start Redis, point Django at the temp dir, migrate, create the bench user."""
+        from fleet import embedded_redis
+
+        self.redis = embedded_redis.start(self.socket)
+        self.env = {
+            "FLEET_VAR_DIR": str(self.tmp),
+            "REDIS_URL": f"unix://{self.socket}",
+            "DJANGO_SETTINGS_MODULE": "fleet.settings",
+            "PYTHONUNBUFFERED": "1",
+        }
+        os.environ.pop("DATABASE_URL", None)  # always the temp SQLite: never a shared database
+        os.environ.update(self.env)
+        import django
+
+        django.setup()
+        from django.core.management import call_command
+
+        call_command("migrate", "--noinput", verbosity=0)
+        from django.contrib.auth.models import User
+
+        self.user = User.objects.create_superuser(BENCH_USER, password="bench-password-1")
+        return self
+
+    def session_cookie(self) -> str:
+        """A logged-in session for the bench user, as a browser would hold it."""
+        from django.test import Client
+
+        client = Client()
+        client.force_login(self.user)
+        return client.cookies["sessionid"].value
+
+    # ----- other processes -----
+    @property
+    def http_url(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    @property
+    def ws_url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}"
+
+    def start_web(self, timeout: float = 30.0) -> None:
+        """uvicorn serving the ASGI app (HTTP API and Channels WebSockets)."""
+        if "web" in self.procs:
+            return
+        cmd = [
+            sys.executable,
+            "-m",
+            "uvicorn",
+            "fleet.asgi:application",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(self.port),
+            "--log-level",
+            "warning",
+            "--no-access-log",
+        ]
+        self._spawn("web", cmd)
+        deadline = time.time() + timeout
+        while time.time() < deadline:
+            try:
+                urllib.request.urlopen(f"{self.http_url}/login/", timeout=1)
+                return
+            except OSError:
+                self._check_alive("web")
+                time.sleep(0.2)
+        raise RuntimeError(f"portal web server did not answer within {timeout:g} s (log: {self.tmp}/web.log)")
+
+    def start_worker(self, queues: str = "instructions,control,registration", concurrency: int = 2) -> None:
+        if "worker" in self.procs:
+            return
+        cmd = [
+            sys.executable,
+            "-m",
+            "celery",
+            "-A",
+            "fleet",
+            "worker",
+            "-Q",
+            queues,
+            "-c",
+            str(concurrency),
+            "-l",
+            "warning",
+            "--without-gossip",
+            "--without-mingle",
+            "--without-heartbeat",
+        ]
+        self._spawn("worker", cmd)
+        time.sleep(2.0)
+        self._check_alive("worker")
+
+    def _spawn(self, name: str, cmd: list[str]) -> None:
+        log = open(self.tmp / f"{name}.log", "wb")  # noqa: SIM115 - lives as long as the process
+        self.procs[name] = subprocess.Popen(
+            cmd, cwd=BASE_DIR, env={**os.environ, **self.env}, stdout=log, stderr=subprocess.STDOUT
+        )
+
+    def _check_alive(self, name: str) -> None:
+        proc = self.procs[name]
+        if proc.poll() is not None:
+            tail = (self.tmp / f"{name}.log").read_text(errors="replace")[-1500:]
+            raise RuntimeError(f"portal {name} exited with {proc.returncode}:\n{tail}")
+
+    def log_tail(self, name: str, chars: int = 1500) -> str:
+        path = self.tmp / f"{name}.log"
+        return path.read_text(errors="replace")[-chars:] if path.exists() else ""
+
+    def close(self) -> None:
+        """Stop the processes this portal started (by their ids), Redis, and remove the temp dir."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.terminate()
+        for proc in self.procs.values():
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        if self.redis is not None:
+            from fleet import embedded_redis
+
+            embedded_redis.stop(self.redis, self.socket)
+        shutil.rmtree(self.tmp, ignore_errors=True)

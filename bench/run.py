@@ -1,0 +1,413 @@
+"""`python -m bench.run --quick|--full`: every experiment against a fresh simulated fleet and a private portal.
+
+Each experiment is independent: one that cannot run (a part of the system missing, an error) is recorded with
+the reason and the others still run. Results: bench/results/ (summary.json, <experiment>.json, REPORT.md, PNGs).
+"""
+
+import argparse
+import asyncio
+import json
+import subprocess
+import sys
+import time
+import traceback
+from pathlib import Path
+
+from bench import report
+from bench.drivers import DirectDriver, PortalDriver, Unavailable
+from bench.probe import Reception, sim_robot_link, watch_odometry
+from bench.response import ODOM_WATCH_MAX, command_latency, robots_scale, speed_grid
+
+RESULTS = Path(__file__).resolve().parent / "results"
+MODES = {
+    "quick": {
+        "repeats": 1,
+        "hold_s": 0.5,
+        "counts": [1, 2, 4, 8, 16],
+        "latency": (1, 10, 100),
+        "rounds": 10,
+        "extra": 96,
+        "stale_robots": 200,
+        "stale_s": 5.0,
+        "component_timeout": 60,
+    },
+    "full": {
+        "repeats": 5,
+        "hold_s": 1.0,
+        "counts": [1, 2, 4, 8, 16, 32, 64, 128, 256],
+        "latency": (1, 10, 100),
+        "rounds": 50,
+        "extra": 252,
+        "stale_robots": 200,
+        "stale_s": 20.0,
+        "component_timeout": 600,
+    },
+}
+COMPONENTS = {  # bench module (owned by its component's engineer) -> summary keys it may report
+    "sim_capacity": ("sim_realtime_robots",),
+    "interpreter_throughput": ("interpreter_per_s",),
+    "registration": ("registration_s", "identification_ms_1200_topics"),
+}
+
+
+def result(title: str, status: str = "ok", **fields) -> dict:
+    return {"title": title, "status": status, "reason": "", "notes": [], **fields}
+
+
+class Bench:
+    """One run: the simulated world, the rosbridge clients, the portal, and every result so far."""
+
+    def __init__(self, mode: str, sim, portal) -> None:
+        self.mode, self.cfg, self.sim, self.portal = mode, MODES[mode], sim, portal
+        self.results: dict[str, dict] = {}
+        self.reception = Reception(sim)
+        self.clients: dict[str, object] = {}
+        self.watches: dict = {}
+
+    async def client(self, url: str):
+        from robots.rosbridge import RosbridgeClient
+
+        if url not in self.clients:
+            self.clients[url] = RosbridgeClient(url, ping_interval=None)
+            await self.clients[url].connect()
+        return self.clients[url]
+
+    async def links(self, names: list[str], watch: int = ODOM_WATCH_MAX):
+        links = [sim_robot_link(self.sim, n) for n in names]
+        for i, link in enumerate(links):
+            self.reception.watch(link)
+            await self.client(link.url)
+            if link.name not in self.watches and i < watch:
+                self.watches[link.name] = await watch_odometry(self.clients[link.url], link)
+        return links
+
+    def fleet_names(self, n: int) -> list[str]:
+        """robot1..robotN: the namespaced TurtleBot3s (1-4 on one endpoint, the extras on another)."""
+        return [f"robot{i}" for i in range(1, n + 1) if f"robot{i}" in self.sim.fleet.robots]
+
+    async def guarded(self, name: str, title: str, coro) -> None:
+        """Run one experiment; record why it did not run rather than stop the bench."""
+        started = time.time()
+        print(f"[bench] {name}: {title} ...", flush=True)
+        try:
+            self.results[name] = await coro
+        except Unavailable as exc:
+            self.results[name] = result(title, "skipped", reason=str(exc))
+        except Exception as exc:  # one experiment's failure is reported, the others still run
+            self.results[name] = result(
+                title,
+                "error",
+                reason=f"{type(exc).__name__}: {exc}",
+                traceback=traceback.format_exc()[-3000:],
+            )
+        self.results[name]["seconds"] = round(time.time() - started, 1)
+        print(
+            f"[bench] {name}: {self.results[name]['status']} in {self.results[name]['seconds']} s "
+            f"{self.results[name].get('reason', '')}",
+            flush=True,
+        )
+
+    # ----- experiments -----
+    async def exp1_direct(self) -> dict:
+        (link,) = await self.links(["turtlebot"])
+        driver = DirectDriver(self.clients)
+        grid = await speed_grid(
+            driver, link, self.watches, self.reception, self.cfg["repeats"], self.cfg["hold_s"], table=3
+        )
+        await driver.close()
+        return result(
+            "Experiment 1: direct rosbridge publish (no portal), Table 3",
+            cells=grid.pop("cells"),
+            notes=[grid["cap"]],
+            **grid,
+        )
+
+    async def exp4_scale_direct(self) -> dict:
+        links = await self.links(self.fleet_names(max(self.cfg["counts"])))
+        driver = DirectDriver(self.clients)
+        counts = [n for n in self.cfg["counts"] if n <= len(links)]
+        scale = await robots_scale(
+            driver, links, self.watches, self.reception, counts, self.cfg["repeats"], self.cfg["hold_s"]
+        )
+        await driver.close()
+        for cell in scale["cells"]:
+            cell["table"] = "6-direct"  # not the paper's portal path: kept out of Table 6
+        series = _scale_series(scale["points"], "direct", "exp4_direct.png")
+        return result(
+            "Experiment 4 baseline: start/stop with 1..N robots, direct publish",
+            series=[series],
+            notes=[f"odometry watched on at most {ODOM_WATCH_MAX} robots per trial"],
+            **scale,
+        )
+
+    async def latency(self) -> dict:
+        links = await self.links(self.fleet_names(max(self.cfg["latency"])), watch=0)
+        direct = DirectDriver(self.clients)
+        measured = await command_latency(
+            direct, links, self.reception, self.cfg["latency"], self.cfg["rounds"]
+        )
+        await direct.close()
+        out = result(
+            "Command latency: issued -> received at the robot's endpoint (direct and portal)",
+            direct=measured["detail"],
+            summary={"direct_latency_ms": measured["summary"]},
+        )
+        try:
+            portal_driver = await self.portal_driver(links)
+        except Unavailable as exc:
+            out["status"], out["reason"] = "partial", f"portal path not measured: {exc}"
+            return out
+        via_portal = await command_latency(
+            portal_driver, links, self.reception, self.cfg["latency"], self.cfg["rounds"]
+        )
+        await portal_driver.close()
+        out["portal"] = via_portal["detail"]
+        out["summary"]["command_latency_ms"] = via_portal["summary"]
+        out["ratio_p50"] = {
+            n: _ratio(via_portal["summary"][n]["p50"], measured["summary"][n]["p50"])
+            for n in via_portal["summary"]
+        }
+        return out
+
+    async def portal_driver(self, links) -> PortalDriver:
+        """The portal's teleop over /ws/fleet/, robots registered by hand (no identification)."""
+        try:
+            import fleet.control  # noqa: F401 - the consumer needs it to publish
+        except ImportError as exc:
+            raise Unavailable("fleet.control (execution: teleop/stop publishing) does not exist yet") from exc
+        import websockets
+
+        ids = await asyncio.to_thread(hand_register, links)
+        self.portal.start_web()
+        self.portal.start_worker()
+        cookie = await asyncio.to_thread(self.portal.session_cookie)
+        ws = await websockets.connect(
+            f"{self.portal.ws_url}/ws/fleet/",
+            max_size=None,
+            additional_headers={"Cookie": f"sessionid={cookie}", "Origin": self.portal.http_url},
+        )
+        return PortalDriver(ws, ids)
+
+    async def portal_grid(self, table: int, identified: bool) -> dict:
+        (link,) = await self.links(["turtlebot"])
+        if identified:
+            await asyncio.to_thread(auto_register, [self.sim.urls["turtlebot"]])
+        driver = await self.portal_driver([link])
+        grid = await speed_grid(
+            driver, link, self.watches, self.reception, self.cfg["repeats"], self.cfg["hold_s"], table=table
+        )
+        await driver.close()
+        return result(
+            f"Experiment {table - 1}: through the portal",
+            cells=grid.pop("cells"),
+            notes=[grid["cap"]],
+            **grid,
+        )
+
+    async def staleness(self) -> dict:
+        from bench.live_staleness import measure
+
+        n = self.cfg["stale_robots"]
+        links = await self.links(self.fleet_names(n), watch=0)
+        if len(links) < n:
+            raise Unavailable(f"only {len(links)} simulated robots (wanted {n})")
+        await asyncio.to_thread(hand_register, links)
+        self.portal.start_web()
+        feeder = subprocess.Popen(
+            [sys.executable, "-m", "bench.live_staleness", "feed"],
+            cwd=RESULTS.parent.parent,
+            env={**__import__("os").environ, **self.portal.env},
+        )
+        driver = DirectDriver(self.clients)
+        try:
+            await driver.start(links, links[0].max_linear * 0.3, 0.3)
+            cookie = await asyncio.to_thread(self.portal.session_cookie)
+            await asyncio.sleep(2.0)
+            got = await measure(
+                f"{self.portal.ws_url}/ws/fleet/", cookie, self.portal.http_url, 10, self.cfg["stale_s"]
+            )
+        finally:
+            await driver.stop(links)
+            await driver.close()
+            feeder.terminate()
+            feeder.wait(timeout=10)
+        stats = got["staleness_ms"]
+        if not stats["n"]:
+            raise Unavailable(
+                f"no pose reached the browsers ({got['errors'][:2] or 'no fleet.poses messages'})"
+            )
+        return result(
+            "Live staleness: simulator odometry -> browser WebSocket",
+            **got,
+            summary={
+                "live_staleness_ms": {"p50": stats["p50"], "p99": stats["p99"], "robots": n, "clients": 10}
+            },
+        )
+
+    async def run_all(self) -> None:
+        await self.guarded("exp1_direct", "direct publish, Table 3", self.exp1_direct())
+        await self.guarded("exp2_portal", "portal, hand-registered, Table 4", self.portal_grid(4, False))
+        await self.guarded("exp3_portal_identified", "portal, identified, Table 5", self.portal_grid(5, True))
+        await self.guarded("exp4_scale_direct", "1..N robots, direct", self.exp4_scale_direct())
+        await self.guarded("latency", "command latency portal vs direct", self.latency())
+        for name in ("exp4_portal", "exp5_move", "exp6_sequence", "exp7_success", "stop_queued"):
+            await self.guarded(name, name, self.needs_execution(name))
+        await self.guarded("live_staleness", "live push staleness", self.staleness())
+        for client in self.clients.values():
+            await client.close()
+
+    async def needs_execution(self, name: str) -> dict:
+        from bench import execution
+
+        return await execution.run(self, name)
+
+
+def _ratio(a, b):
+    return round(a / b, 2) if a is not None and b else None
+
+
+def _scale_series(points: list[dict], label: str, file: str) -> dict:
+    return {
+        "title": f"Start/stop response vs robots ({label})",
+        "x": "robots",
+        "y": "seconds (median)",
+        "file": file,
+        "logx": True,
+        "lines": {
+            "start": [(p["robots"], p["start_s"]["p50"]) for p in points],
+            "stop": [(p["robots"], p["stop_s"]["p50"]) for p in points],
+        },
+    }
+
+
+def hand_register(links) -> dict[str, int]:
+    """Robots entered by a person (the paper's experiment 2): no discovery, the known topics bound by hand."""
+    from robots.models import Binding, Robot
+
+    ids = {}
+    for link in links:
+        pose = list(link.start)
+        robot, _ = Robot.objects.update_or_create(
+            name=link.name,
+            defaults={
+                "endpoint": link.url,
+                "namespace": _namespace(link),
+                "max_linear": link.max_linear,
+                "max_angular": link.max_angular,
+                "start_pose": pose,
+                "link_status": Robot.Link.ONLINE,
+                "state": Robot.State.READY,
+            },
+        )
+        for action, target, type_ in (
+            ("move", link.cmd_topic, "geometry_msgs/Twist"),
+            ("odometry", link.odom_topic, "nav_msgs/Odometry"),
+        ):
+            Binding.objects.update_or_create(
+                robot=robot,
+                action=action,
+                defaults={
+                    "target": target,
+                    "message_type": type_,
+                    "how": Binding.How.USER,
+                    "confidence": 1.0,
+                },
+            )
+        ids[link.name] = robot.pk
+    return ids
+
+
+def _namespace(link) -> str:
+    parts = link.cmd_topic.strip("/").split("/")
+    return f"/{parts[0]}" if parts[0].startswith("robot") else ""
+
+
+def auto_register(urls: list[str]):
+    try:
+        from robots.registration import register_endpoints
+    except ImportError as exc:
+        raise Unavailable("robots.registration.register_endpoints does not exist yet") from exc
+    return register_endpoints(urls)
+
+
+def run_components(mode: str, timeout: int) -> dict[str, dict]:
+    """The component benches other engineers own: run each as `python -m bench.<name> --<mode>`."""
+    out = {}
+    for name, keys in COMPONENTS.items():
+        title = f"component bench bench/{name}.py"
+        if not (RESULTS.parent / f"{name}.py").exists():
+            out[name] = result(title, "skipped", reason=f"bench/{name}.py does not exist yet")
+            continue
+        print(f"[bench] {name} ...", flush=True)
+        try:
+            proc = subprocess.run(
+                [sys.executable, "-m", f"bench.{name}", f"--{mode}"],
+                cwd=RESULTS.parent.parent,
+                capture_output=True,
+                text=True,
+                timeout=timeout,
+            )
+        except subprocess.TimeoutExpired:
+            out[name] = result(title, "error", reason=f"did not finish within {timeout} s")
+            continue
+        out[name] = _component_result(name, title, keys, proc)
+    return out
+
+
+def _component_result(name: str, title: str, keys, proc) -> dict:
+    path = RESULTS / f"{name}.json"
+    if proc.returncode != 0 or not path.exists():
+        return result(title, "error", reason=f"exit {proc.returncode}: {(proc.stderr or proc.stdout)[-800:]}")
+    data = json.loads(path.read_text())
+    summary = {k: data[k] for k in keys if k in data}
+    status = "ok" if summary else "partial"
+    reason = "" if summary else f"its JSON has none of the summary keys {keys}"
+    return result(
+        title, status, reason=reason, summary=summary, component=data, profile=data.get("profile", "")
+    )
+
+
+async def bench_async(mode: str, portal) -> dict:
+    from simworker.testing import running_world
+
+    with running_world("paper", extra=MODES[mode]["extra"]) as sim:
+        bench = Bench(mode, sim, portal)
+        await bench.run_all()
+        return bench.results
+
+
+def run_fleet(mode: str) -> dict:
+    """Set the private portal up (synchronously: Django's ORM refuses an event loop), then run the bench."""
+    from bench.portal import Portal
+
+    portal = Portal()
+    try:
+        portal.setup()
+        return asyncio.run(bench_async(mode, portal))
+    finally:
+        portal.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--quick", action="store_const", const="quick", dest="mode")
+    group.add_argument("--full", action="store_const", const="full", dest="mode")
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument(
+        "--no-components", action="store_true", help="skip the component benches (for a re-run)"
+    )
+    args = parser.parse_args(argv)
+    mode = args.mode or "full"
+    started = time.time()
+    results = {} if args.no_components else run_components(mode, MODES[mode]["component_timeout"])
+    results |= run_fleet(mode)
+    meta = {"mode": mode, "seconds": round(time.time() - started), "at": time.strftime("%Y-%m-%d %H:%M:%S")}
+    summary = report.write_all(results, args.out, mode, meta)
+    print(report.render_headline(summary))
+    print(f"[bench] wrote {args.out}/summary.json and REPORT.md in {meta['seconds']} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
