@@ -10,7 +10,8 @@ linear in the number of topics, not the paper's O(n^4)), then a score adds up:
 - +0.1 x weight for the best keyword of the paper's lists (cmd, vel, velocity, speed, travel, run; goal, amcl,
   odom, scan, map...) or of the database's TopicKeyword rows: how = pattern;
 - +0.05 for an ontology synonym of the action in the name: how = synonym;
-- graph facts, below. The best candidate is bound with confidence = min(1, score). A tie, or no candidate
+- graph facts: for odometry +0.25 when the robot's navigation stack subscribes to it (Husky: the EKF's
+  /odometry/filtered over the controller's raw odometry); for move, the twist_mux rule below. The best candidate is bound with confidence = min(1, score). A tie, or no candidate
   for move or odometry, binds nothing: needs_user, with the candidates kept for a person. Optional actions
   (navigate, pose, scan, map, initial_pose, battery) with no candidate are simply absent, not a question.
 
@@ -125,6 +126,7 @@ class Facts:
     mux_inputs: set[str] = field(default_factory=set)
     mux_outputs: set[str] = field(default_factory=set)
     nav_published: set[str] = field(default_factory=set)
+    nav_subscribed: set[str] = field(default_factory=set)
     teleop_published: set[str] = field(default_factory=set)
 
 
@@ -140,6 +142,7 @@ def graph_facts(graph: Graph) -> Facts:
         last = node.rsplit("/", 1)[-1]
         if last in NAV_NODES:
             facts.nav_published |= set(detail.get("publishing", ()))
+            facts.nav_subscribed |= set(detail.get("subscribing", ()))
         if any(word in node for word in TELEOP_WORDS):
             facts.teleop_published |= pubs
     return facts
@@ -178,11 +181,16 @@ def _move_facts(name: str, facts: Facts) -> float:
     return bonus
 
 
+def _odometry_facts(name: str, facts: Facts) -> float:
+    """The odometry the robot's own navigation listens to is the one it trusts (Husky: the EKF's)."""
+    return 0.25 if name in facts.nav_subscribed else 0.0
+
+
 def _map_facts(name: str, facts: Facts) -> float:
     return -0.3 if "costmap" in name else 0.0
 
 
-FACT_RULES = {"move": _move_facts, "map": _map_facts}
+FACT_RULES = {"move": _move_facts, "odometry": _odometry_facts, "map": _map_facts}
 
 
 def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:

@@ -277,6 +277,14 @@ def _spot_ros1(iface: Interface, ns: str, stack: str) -> None:
     )
 
 
+def _nav_odometry(iface: Interface, t: dict) -> list[tuple[str, str]]:
+    """The odometry the navigation stack listens to: the robot's last (most fused) odometry topic.
+
+    Husky's move_base takes the EKF's /odometry/filtered, TIAGo's the base controller's odometry.
+    """
+    return [(iface.odom_topics[-1][0], t["odom"])] if iface.odom_topics else []
+
+
 def _move_base(iface: Interface, ns: str) -> None:
     """Add ROS 1 move_base, amcl and map_server (topics as robot_profiles common.ros1_navigation)."""
     t = ROS1
@@ -296,6 +304,7 @@ def _move_base(iface: Interface, ns: str) -> None:
             (f"{mb}/cancel", "actionlib_msgs/GoalID"),
             (f"{ns}/move_base_simple/goal", t["pose"]),
             (f"{ns}/map", t["grid"]),
+            *_nav_odometry(iface, t),
         ],
         services=[
             (f"{mb}/make_plan", "nav_msgs/GetPlan"),
@@ -351,6 +360,7 @@ def _nav2(iface: Interface, ns: str) -> None:
     iface.add(
         f"{ns}/controller_server",
         pubs=[(f"{ns}/cmd_vel_nav", t["twist"]), (f"{ns}/local_plan", "nav_msgs/msg/Path")],
+        subs=_nav_odometry(iface, t),
     )
     iface.add(
         f"{ns}/velocity_smoother",

@@ -59,6 +59,9 @@ class SimRobot:
         self.ns = spec.namespace.rstrip("/")
         self.iface = build_interface(profile, self.ns, self.graph.ros_version, spec.stack, spec.name)
         self.start = (spec.x, spec.y, spec.yaw)
+        # Where the robot was spawned, as a Gazebo launch file passes it (-x -y -Y): the odometry origin on the map.
+        # Real robots without such a param get their map pose from amcl_pose or from an initial pose a person sets.
+        self.iface.params[f"{self.ns}/initial_pose"] = [spec.x, spec.y, spec.yaw]
         self.odom_noise = odom_noise
         self.drift = [0.0, 0.0, 0.0]
         self.seq = 0

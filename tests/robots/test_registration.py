@@ -31,7 +31,7 @@ def test_demo_world_registers_seven_robots_with_move_odometry_and_wheels(paper_w
     assert set(robots) == {"turtlebot", "husky", "tiago", "robot1", "robot2", "robot3", "robot4"}
     expected = {
         "turtlebot": ("/cmd_vel", "/odom", 2),
-        "husky": ("/cmd_vel", "/husky_velocity_controller/odom", 4),
+        "husky": ("/cmd_vel", "/odometry/filtered", 4),
         "tiago": ("/nav_vel", "/mobile_base_controller/odom", 2),
         **{f"robot{i}": (f"/robot{i}/cmd_vel", f"/robot{i}/odom", 2) for i in range(1, 5)},
     }
@@ -44,6 +44,9 @@ def test_demo_world_registers_seven_robots_with_move_odometry_and_wheels(paper_w
     assert robots["robot3"].namespace == "/robot3"
     assert robots["husky"].model == "husky" and robots["husky"].max_linear == 1.0
     assert robots["tiago"].start_pose == pytest.approx([0.0, -3.0, 1.5708], abs=1e-3)
+    assert robots["turtlebot"].start_pose == pytest.approx(
+        [-2.0, -0.5, 0.0], abs=1e-3
+    )  # no amcl: spawn param
     assert bound(robots["robot1"], "navigate") == "/robot1/move_base"
     assert TimeSlot.objects.filter(robot__name="tiago").count() == 3  # Table 12 slots attached
 
