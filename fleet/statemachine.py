@@ -49,8 +49,9 @@ TRANSITIONS: dict[Event, dict[State, State]] = {
     E.LINK_DOWN: {state: S.OFFLINE for state in (S.REGISTERED, S.READY, *ACTIVE)},
     E.IDLE_TIMEOUT: {S.READY: S.OFFLINE},
     E.ASK: {S.READY: S.DIALOG},
-    E.MOVE: {S.READY: S.MOTION, S.DIALOG: S.MOTION, S.WORK: S.MOTION},
-    E.WORK: {S.READY: S.WORK, S.DIALOG: S.WORK, S.MOTION: S.WORK},
+    # motion -> motion: the next leg ("to D then E"); work -> work: the next task. Both are stored.
+    E.MOVE: {S.READY: S.MOTION, S.DIALOG: S.MOTION, S.WORK: S.MOTION, S.MOTION: S.MOTION},
+    E.WORK: {S.READY: S.WORK, S.DIALOG: S.WORK, S.MOTION: S.WORK, S.WORK: S.WORK},
     E.DONE: {state: S.READY for state in ACTIVE},
     E.STOP: {state: S.READY for state in ACTIVE},
     E.FAIL: {state: S.READY for state in ACTIVE},

@@ -9,6 +9,7 @@ robot that starts moving by itself after a crash is the worse surprise) and its 
 from __future__ import annotations
 
 import logging
+from datetime import timedelta
 
 from django.utils import timezone
 
@@ -19,6 +20,7 @@ from fleet.models import Execution
 from fleet.statemachine import Event
 
 log = logging.getLogger(__name__)
+STALLED_AFTER = 3.0  # s a queued execution may wait for its task before the robot is kicked
 LOST = "the worker running it was lost; the robot was stopped"
 
 
@@ -48,7 +50,9 @@ def recover(robot_ids=None) -> list[int]:
 
 def stalled_robots() -> list[int]:
     """Robots with waiting executions and nobody holding their lock."""
-    robot_ids = set(Execution.objects.filter(status__in=WAITING).values_list("robot_id", flat=True))
+    settled = timezone.now() - timedelta(seconds=STALLED_AFTER)  # give the task its time to be picked up
+    waiting = Execution.objects.filter(status__in=WAITING, created_at__lt=settled)
+    robot_ids = set(waiting.values_list("robot_id", flat=True))
     return sorted(rid for rid in robot_ids if coordination.lock_holder(rid) is None)
 
 

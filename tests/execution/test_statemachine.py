@@ -79,3 +79,8 @@ def test_step_priorities():
 )
 def test_admission_preempts_only_lower_priority(state, priority, expected):
     assert admit(state, priority) == expected
+
+
+def test_next_leg_and_next_task_are_self_transitions():
+    assert next_state(State.MOTION, Event.MOVE) == State.MOTION
+    assert next_state(State.WORK, Event.WORK) == State.WORK

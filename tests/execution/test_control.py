@@ -1,0 +1,36 @@
+"""Teleoperation and stop from the portal's buttons: leases, limits, audit."""
+
+import pytest
+
+from fleet.control import stop, teleop
+from fleet.leases import ControlRefused, take
+from fleet.models import AuditEntry
+from tests.execution.helpers import wait_for
+
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
+
+
+def test_teleop_publishes_within_the_robot_limits_and_is_audited(turtle_world, operator):
+    sim = turtle_world
+    v, w = teleop("turtlebot", operator, 5.0, -9.0)
+    assert (v, w) == (0.22, -2.84)  # clamped to the registered limits
+    command = wait_for(lambda: (c := sim.call(lambda: sim.fleet.robots["turtlebot"].body.cmd)).vx and c)
+    assert (command.vx, command.wz) == pytest.approx((0.22, -2.84))
+    assert AuditEntry.objects.filter(action="teleop", target="turtlebot", user=operator).exists()
+    assert stop(["turtlebot"], operator) == {"turtlebot": "stopped"}
+    wait_for(lambda: sim.call(lambda: sim.fleet.robots["turtlebot"].body.cmd).vx == 0.0, what="zero")
+
+
+def test_teleop_and_stop_respect_leases_and_roles(turtle_world, operator, second_operator, viewer):
+    with pytest.raises(ControlRefused, match="may only view"):
+        teleop("turtlebot", viewer, 0.1, 0.0)
+    with pytest.raises(ControlRefused, match="may only view"):
+        stop(["turtlebot"], viewer)
+    take(second_operator, turtle_world.robots["turtlebot"])
+    with pytest.raises(ControlRefused, match="held by olga"):
+        teleop("turtlebot", operator, 0.1, 0.0)
+
+
+def test_stop_names_unknown_robots(turtle_world, operator):
+    with pytest.raises(ValueError, match="No robot named wall-e"):
+        stop(["wall-e"], operator)
