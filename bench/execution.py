@@ -36,6 +36,7 @@ async def submit_and_wait(bench, text: str, timeout: float = 60.0) -> dict:
             break
         await asyncio.sleep(0.05)
     total = (row.finished_at - row.received_at).total_seconds() if row.finished_at else None
+    bench.outcomes.append({"status": row.status, "outcome": row.outcome[:200], "error": row.error[:200]})
     return {
         "id": row.pk,
         "text": text,
@@ -147,4 +148,13 @@ async def run(bench, name: str) -> dict:
     _require_execution()
     if name not in EXPERIMENTS:
         raise Unavailable(f"{name}: not written yet (needs the execution engine's interfaces to settle)")
-    return await EXPERIMENTS[name](bench)
+    bench.outcomes = []
+    out = await EXPERIMENTS[name](bench)
+    failed = [o for o in bench.outcomes if o["status"] != "succeeded"]
+    out["failures"] = failed[:20]
+    if failed and len(failed) == len(bench.outcomes):
+        out["status"], out["summary"] = "error", {}
+        out["reason"] = (
+            f"no instruction succeeded; first: {failed[0]['status']}: {failed[0]['outcome'] or failed[0]['error']}"
+        )
+    return out

@@ -41,10 +41,13 @@ class Portal:
         """Start Redis, point Django at the temp dir, migrate, create the bench user."""
         from fleet import embedded_redis
 
-        self.redis = embedded_redis.start(self.socket)
+        redis_url = os.environ.get("BENCH_REDIS_URL")  # e.g. redis://127.0.0.1:6379/13, else a private one
+        if not redis_url:
+            self.redis = embedded_redis.start(self.socket)
+            redis_url = f"unix://{self.socket}"
         self.env = {
             "FLEET_VAR_DIR": str(self.tmp),
-            "REDIS_URL": f"unix://{self.socket}",
+            "REDIS_URL": redis_url,
             "DJANGO_SETTINGS_MODULE": "fleet.settings",
             "PYTHONUNBUFFERED": "1",
         }
@@ -59,6 +62,10 @@ class Portal:
         from django.contrib.auth.models import User
 
         self.user = User.objects.create_superuser(BENCH_USER, password="bench-password-1")
+        try:
+            call_command("setup_demo", verbosity=0)  # the demo map and its locations A..I
+        except Exception as exc:  # the bench still runs what needs no locations
+            print(f"[bench] setup_demo failed: {exc}", flush=True)
         return self
 
     def session_cookie(self) -> str:

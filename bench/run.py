@@ -26,7 +26,7 @@ MODES = {
         "counts": [1, 2, 4, 8, 16],
         "latency": (1, 10, 100),
         "rounds": 10,
-        "extra": 96,
+        "extra": 196,
         "stale_robots": 200,
         "stale_s": 5.0,
         "component_timeout": 60,
@@ -259,6 +259,13 @@ class Bench:
     async def needs_execution(self, name: str) -> dict:
         from bench import execution
 
+        names = ["turtlebot", "husky", "tiago", *self.fleet_names(4)]
+        keys = ("robots", "turtlebot", "husky", "tiago")
+        try:  # registered as the portal does it (navigation bound too), else by hand
+            await asyncio.to_thread(auto_register, [self.sim.urls[k] for k in keys])
+        except Exception:
+            await asyncio.to_thread(hand_register, [sim_robot_link(self.sim, n) for n in names])
+        self.portal.start_worker()
         return await execution.run(self, name)
 
 
