@@ -47,10 +47,12 @@ def env_database(name: str, default_sqlite: Path) -> dict:
 
     raw = os.environ.get(name)
     if not raw:
+        # IMMEDIATE: several robots' runners write at once; a deferred transaction that later upgrades its
+        # lock fails at once with "database is locked" instead of waiting for the timeout.
         return {
             "ENGINE": "django.db.backends.sqlite3",
             "NAME": str(default_sqlite),
-            "OPTIONS": {"timeout": 20},
+            "OPTIONS": {"timeout": 20, "transaction_mode": "IMMEDIATE"},
         }
     scheme = urlparse(raw).scheme
     if scheme not in {"sqlite", "postgres", "postgresql", "pgsql", "postgis"}:

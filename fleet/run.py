@@ -21,7 +21,10 @@ def processes(python: str) -> dict[str, str]:
     manage = f"{python} manage.py"
     procs = {
         "web": f"{python} -m uvicorn fleet.asgi:application --host {HOST} --port {PORT} --log-level warning",
-        "worker": f"{python} -m celery -A fleet worker -Q instructions,control,registration -c 2 -l warning",
+        # Instructions block while robots move, so that worker runs many threads; stops and registrations
+        # have a worker of their own and never wait behind a long instruction.
+        "worker": f"{python} -m celery -A fleet worker -n instructions@%h -Q instructions -P threads -c 32 -l warning",
+        "control": f"{python} -m celery -A fleet worker -n control@%h -Q control,registration -c 1 -l warning",
         "sim": f"{manage} simworker --world paper",
         "links": f"{manage} robotlinks --register-world paper",
         "scheduler": f"{manage} scheduler",  # time slots, lost workers, stalled robot queues (issue 6)

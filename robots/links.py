@@ -59,7 +59,20 @@ def set_link_status(url: str, up: bool) -> list[str]:
         robot.save(update_fields=["link_status", "last_seen", "updated_at"])
         live.robot_status(robot)
         changed.append(robot.name)
+    follow_link_in_state_machine(url, up)
     return changed
+
+
+def follow_link_in_state_machine(url: str, up: bool) -> None:
+    """A link that comes up makes a registered or offline robot ready; a link that drops makes it offline."""
+    from fleet.execution.states import transition
+    from fleet.statemachine import Event
+
+    waiting = [Robot.State.REGISTERED, Robot.State.OFFLINE]
+    robots = Robot.objects.filter(endpoint=url)
+    robots = robots.filter(state__in=waiting) if up else robots.exclude(state=Robot.State.OFFLINE)
+    for robot in robots:
+        transition(robot, Event.LINK_UP if up else Event.LINK_DOWN, "link up" if up else "link lost")
 
 
 def touch(urls: Iterable[str]) -> None:
