@@ -23,20 +23,28 @@ def _require_execution() -> None:
         raise Unavailable(f"execution engine not there yet ({exc.name} missing)") from exc
 
 
-async def submit_and_wait(bench, text: str, timeout: float = 60.0) -> dict:
+async def submit_and_wait(bench, text: str, timeout: float | None = None) -> dict:
     """Submit as the bench user and wait for a final status; return the instruction's timings."""
     from fleet.instructions import submit
     from fleet.models import Instruction
 
     instruction = await asyncio.to_thread(submit, text, bench.portal.user, "api")
-    deadline = time.time() + timeout
+    deadline = time.time() + (timeout or (60.0 if bench.mode == "full" else 20.0))
     while time.time() < deadline:
         row = await asyncio.to_thread(Instruction.objects.get, pk=instruction.pk)
         if row.status in FINAL:
             break
         await asyncio.sleep(0.05)
     total = (row.finished_at - row.received_at).total_seconds() if row.finished_at else None
-    bench.outcomes.append({"status": row.status, "outcome": row.outcome[:200], "error": row.error[:200]})
+    bench.outcomes.append(
+        {"status": row.status, "outcome": row.outcome[:200], "error": row.error[:200], "text": text}
+    )
+    if len(bench.outcomes) >= 2 and not any(o["status"] == "succeeded" for o in bench.outcomes):
+        first = bench.outcomes[0]
+        raise RuntimeError(
+            f"the first instructions did not succeed ({first['text']!r}: {first['status']} "
+            f"{first['outcome'] or first['error'] or 'no outcome within the timeout'})"
+        )
     return {
         "id": row.pk,
         "text": text,

@@ -266,7 +266,12 @@ class Bench:
         except Exception:
             await asyncio.to_thread(hand_register, [sim_robot_link(self.sim, n) for n in names])
         self.portal.start_worker()
-        return await execution.run(self, name)
+        limit = 600 if self.mode == "full" else 45
+        try:
+            return await asyncio.wait_for(execution.run(self, name), limit)
+        except TimeoutError:
+            tail = self.portal.log_tail("worker", 400)
+            raise RuntimeError(f"did not finish within {limit} s; worker log ends: {tail}") from None
 
 
 def _ratio(a, b):
