@@ -70,16 +70,29 @@ def _free_port() -> int:
         return probe.getsockname()[1]
 
 
+def _fresh_interpreter():
+    """The server is a fresh process: forget robots and places an earlier test's database gave the interpreter."""
+    try:
+        from interpreter.service import store
+    except ImportError:
+        return
+    store.cache_clear()
+
+
 @pytest.fixture
-def live_url(transactional_db):
+def live_url(transactional_db, settings):
     """The whole portal (HTTP and WebSockets) on a free port; the test's committed rows are what it serves."""
     import threading
     import time
+    import uuid
 
     import uvicorn
 
     from fleet.asgi import application
 
+    # execution's Redis keys (stop flags live 10 min) must not carry over between runs that reuse robot ids
+    settings.FLEET_EXEC_KEY_PREFIX = f"test:portal:{uuid.uuid4().hex[:8]}"
+    _fresh_interpreter()
     port = _free_port()
     config = uvicorn.Config(application, host="127.0.0.1", port=port, log_level="warning", lifespan="off")
     server = uvicorn.Server(config)
@@ -128,3 +141,15 @@ def login(browser, live_url):
         return page
 
     return _login
+
+
+@pytest.fixture
+def seeded_terms(transactional_db):
+    """The interpreter's seed terms, which a flush after an earlier transactional test has wiped."""
+    import importlib
+
+    from django.apps import apps
+
+    migration = importlib.import_module("interpreter.migrations.0002_seed_terms")
+    migration.seed(apps, None)
+    _fresh_interpreter()

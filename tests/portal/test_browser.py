@@ -17,8 +17,10 @@ def test_viewer_has_no_control(login, viewer, fleet, live_url):
     _live(page)
     assert page.locator("#stop-all").count() == 0
     assert page.get_by_label("Instruction", exact=True).count() == 0
-    page.wait_for_selector("#robot-table tr[data-name=turtlebot] .state[data-state=ready]")
-    assert "● ready" in page.locator("#robot-table tr[data-name=turtlebot] .state").inner_text()
+    # state shown by a glyph and a word, not by colour alone
+    page.wait_for_selector(
+        "#robot-table tr[data-name=turtlebot] .state[data-state=ready]:has-text('● ready')"
+    )
     page.goto(f"{live_url}/robots/{fleet['turtlebot'].pk}/")
     _live(page)
     assert page.get_by_role("button", name="Take control").count() == 0

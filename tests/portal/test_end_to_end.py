@@ -23,7 +23,7 @@ def eager_celery(monkeypatch):
     monkeypatch.setitem(app.conf, "task_eager_propagates", True)
 
 
-def test_register_instruct_watch_answer_and_stop(login, fleet_admin, live_url, eager_celery):
+def test_register_instruct_watch_answer_and_stop(seeded_terms, login, fleet_admin, live_url, eager_celery):
     with demo_world() as world:
         page = login(fleet_admin)
         page.goto(f"{live_url}/register/")
@@ -38,7 +38,15 @@ def test_register_instruct_watch_answer_and_stop(login, fleet_admin, live_url, e
             page.wait_for_selector("#conn[data-state=live]")
             page.get_by_label("Instruction", exact=True).fill("move turtlebot to A")
             page.get_by_role("button", name="Send").click()
-            page.wait_for_function(NEAR_A, timeout=90000)
+            try:
+                page.wait_for_function(NEAR_A, timeout=90000)
+            except Exception:
+                robot = "[...window.fleet.map.robots.values()].find((r) => r.name === 'turtlebot')"
+                print(
+                    "DIAG", page.locator("#parse").inner_text(), page.locator("#progress").inner_text()[:800]
+                )
+                print("DIAG pose", page.evaluate(f"() => JSON.stringify({robot})"))
+                raise
             page.wait_for_selector(".parse:has-text('type I')")
 
             page.get_by_label("Instruction", exact=True).fill("zoom turtlebot to B")

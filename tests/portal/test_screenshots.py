@@ -18,7 +18,7 @@ pytestmark = [
 ]
 
 
-def test_write_screenshots(login, fleet_admin, live_url, monkeypatch):
+def test_write_screenshots(seeded_terms, login, fleet_admin, live_url, monkeypatch):
     from fleet.celery import app
     from robots.models import Robot
     from robots.registration import register_endpoints
