@@ -3,27 +3,21 @@
 A robot's map pose is its odometry composed with its start pose (the odometry origin on the map); once an
 amcl pose arrives, the map->odom offset is corrected from it, so later odometry stays on the map.
 
-How a link process (``manage.py robotlinks``) drives it, with its own rosbridge client::
+How the link process (``manage.py robotlinks``) drives it::
 
     hub = PoseHub()                                   # one per process, in its event loop
-    for robot in Robot.objects.prefetch_related("bindings"):
-        for sub in hub.subscriptions(robot):          # odometry (and pose if bound)
-            link.subscribe(sub.topic, sub.msg_type, sub.callback,
-                           throttle_rate=sub.throttle_rate, queue_length=sub.queue_length)
-    task = asyncio.create_task(hub.run(stop_event))   # one batched "fleet.poses" message per tick
-    ...
-    hub.forget(robot.pk)                              # when a robot is removed
+    manager = LinkManager(hooks=[link_hook(hub)])     # subscribes odometry (and amcl pose) per robot
+    await asyncio.gather(manager.run(), hub.run(stop)) # one batched "fleet.poses" message per tick
 
-Callbacks take the decoded ROS message (a dict) and may be called from any thread. Without a link process,
-``follow(robots, hub, stop)`` subscribes by itself with a minimal rosbridge v2 client (one socket per endpoint,
-reconnecting with backoff).
+Callbacks take the decoded ROS message (a dict) and may be called from any thread. ``link_hook(hub)`` does
+the subscribing on the links process's own rosbridge links; without a link process, ``follow(robots, hub,
+stop)`` opens one link per endpoint itself.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
 import threading
@@ -230,60 +224,45 @@ class PoseHub:
         await self.flush()
 
 
+async def subscribe_all(client, subs: list[Subscription]) -> None:
+    """Subscribe the hub's topics on a rosbridge link (robots.rosbridge renews them after a reconnection)."""
+    for sub in subs:
+        await client.subscribe(
+            sub.topic,
+            sub.msg_type,
+            sub.callback,
+            throttle_rate=sub.throttle_rate,
+            queue_length=sub.queue_length,
+        )
+
+
 async def stream_endpoint(url: str, subs: list[Subscription], stop: asyncio.Event) -> None:
-    """Subscribe the given topics on one rosbridge endpoint and feed their callbacks; reconnect with backoff."""
-    import websockets
+    """Follow the given topics on one endpoint until stopped, on a link of its own that reconnects by itself."""
+    from robots.rosbridge.client import RosbridgeClient
 
-    by_topic = {sub.topic: sub.callback for sub in subs}
-    backoff = 0.5
-    while not stop.is_set():
-        try:
-            async with websockets.connect(url, max_size=2**24, open_timeout=5) as socket:
-                backoff = 0.5
-                for number, sub in enumerate(subs):
-                    await socket.send(json.dumps(_subscribe_op(sub, number)))
-                await _pump(socket, by_topic, stop)
-        except (OSError, TimeoutError, websockets.exceptions.WebSocketException) as exc:
-            log.info("pose stream %s: %s; retrying in %.1f s", url, exc, backoff)
-        if stop.is_set():
-            return
-        try:
-            await asyncio.wait_for(stop.wait(), timeout=backoff)
-        except TimeoutError:
-            backoff = min(backoff * 2, 5.0)
-
-
-def _subscribe_op(sub: Subscription, number: int) -> dict:
-    op = {"op": "subscribe", "id": f"pose:{sub.robot_id}:{number}", "topic": sub.topic}
-    op |= {"throttle_rate": sub.throttle_rate, "queue_length": sub.queue_length}
-    if sub.msg_type:
-        op["type"] = sub.msg_type
-    return op
-
-
-async def _pump(socket, by_topic: dict, stop: asyncio.Event) -> None:
-    stopped = asyncio.ensure_future(stop.wait())
+    client = RosbridgeClient(url, reconnect=True)
+    await client.start()
     try:
-        while True:
-            receive = asyncio.ensure_future(socket.recv())
-            done, _ = await asyncio.wait({receive, stopped}, return_when=asyncio.FIRST_COMPLETED)
-            if stopped in done:
-                receive.cancel()
-                return
-            _dispatch(receive.result(), by_topic)
+        await subscribe_all(client, subs)
+        await stop.wait()
     finally:
-        stopped.cancel()
+        await client.close()
 
 
-def _dispatch(frame, by_topic: dict) -> None:
-    try:
-        message = json.loads(frame)
-    except (TypeError, ValueError):
-        return
-    if isinstance(message, dict) and message.get("op") == "publish":
-        callback = by_topic.get(message.get("topic"))
-        if callback is not None and isinstance(message.get("msg"), dict):
-            callback(message["msg"])
+def link_hook(hub: PoseHub):
+    """A robots.links hook: on each endpoint's link, subscribe every robot's poses for the hub."""
+    from asgiref.sync import sync_to_async
+
+    from robots.models import Robot
+
+    def robots_of(url: str) -> list:
+        return list(Robot.objects.filter(endpoint=url).prefetch_related("bindings"))
+
+    async def hook(client, _robots) -> None:
+        for robot in await sync_to_async(robots_of)(client.url):
+            await subscribe_all(client, await sync_to_async(hub.subscriptions)(robot))
+
+    return hook
 
 
 async def follow(robots, hub: PoseHub, stop: asyncio.Event) -> None:

@@ -84,3 +84,46 @@ async def test_an_endpoint_that_is_down_from_the_start_is_offline(endpoint):
     finally:
         manager.stop()
         await asyncio.wait_for(task, 10)
+
+
+ODOMETRY_AT_1_5 = {
+    "header": {"seq": 0, "stamp": {"secs": 1, "nsecs": 0}, "frame_id": "odom"},
+    "child_frame_id": "base_link",
+    "pose": {
+        "pose": {"position": {"x": 1.5, "y": 0.0, "z": 0.0}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}
+    },
+    "twist": {"twist": {"linear": {"x": 0.0, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0.0}}},
+}
+
+
+async def test_links_stream_map_poses_to_the_portal(endpoint):
+    """The links process's pose hook: odometry on the robot's bound topic becomes a batched map pose."""
+    from fleet.poses import PoseHub, link_hook
+
+    ep = endpoint()
+    await sync_to_async(register_endpoints)([ep.url])
+    robot = await Robot.objects.aget(name="fakebot")
+    batches = asyncio.Queue()
+
+    async def sink(batch):
+        batches.put_nowait(batch)
+
+    hub = PoseHub(publish=sink, rate_hz=20)
+    manager = LinkManager([ep.url], hooks=[link_hook(hub)])
+    tasks = [asyncio.create_task(manager.run()), asyncio.create_task(hub.run(manager.stopping))]
+    try:
+        for _ in range(100):
+            ep.thread.call(ep.server.publish, "/odom", ODOMETRY_AT_1_5)
+            try:
+                batch = await asyncio.wait_for(batches.get(), 0.2)
+            except TimeoutError:
+                continue
+            (pose,) = batch
+            assert pose["id"] == robot.pk
+            assert pose["x"] == pytest.approx(robot.start_pose[0] + 1.5 if robot.start_pose else 1.5)
+            break
+        else:
+            raise AssertionError("no pose batch reached the portal")
+    finally:
+        manager.stop()
+        await asyncio.wait_for(asyncio.gather(*tasks), 10)

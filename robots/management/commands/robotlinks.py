@@ -54,14 +54,17 @@ class Command(BaseCommand):
         asyncio.run(self.main(urls, opts["wait"], opts["only"]))
 
     async def main(self, urls: list[str], wait: float, only: bool) -> None:
-        manager = LinkManager(urls if only else None)
+        from fleet.poses import PoseHub, link_hook
+
+        hub = PoseHub()  # live poses for the portal, from the links' own odometry subscriptions
+        manager = LinkManager(urls if only else None, hooks=[link_hook(hub)])
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, manager.stop)
         if urls:
             await self.register(urls, wait, manager.stopping)
         self.stdout.write("robot links running (Ctrl-C to stop)")
-        await manager.run()
+        await asyncio.gather(manager.run(), hub.run(manager.stopping))
         self.stdout.write("robot links stopped")
 
     async def register(self, urls: list[str], wait: float, stopping: asyncio.Event) -> None:
