@@ -35,6 +35,15 @@ def check_command(user, robot) -> None:
         raise ControlRefused(f"{robot.name} is held by {held_by.username}; ask them to release it.")
 
 
+def check_stop(user) -> None:
+    """Raise ControlRefused unless the user may stop robots: any operator stops any robot, held or not.
+
+    A lease keeps others from driving a robot, never from stopping it: a stop always gets through.
+    """
+    if not can_control(user):
+        raise ControlRefused(f"{user.username} may only view robots, not command them.")
+
+
 @transaction.atomic
 def take(user, robot, seconds: int | None = None) -> ControlLease:
     """Take (or renew) control of a robot; an admin takes over from anyone."""

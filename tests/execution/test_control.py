@@ -29,6 +29,7 @@ def test_teleop_and_stop_respect_leases_and_roles(turtle_world, operator, second
     take(second_operator, turtle_world.robots["turtlebot"])
     with pytest.raises(ControlRefused, match="held by olga"):
         teleop("turtlebot", operator, 0.1, 0.0)
+    assert stop(["turtlebot"], operator) == {"turtlebot": "stopped"}  # a lease never blocks a stop
 
 
 def test_stop_names_unknown_robots(turtle_world, operator):
