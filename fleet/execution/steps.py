@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 from django.utils import timezone
 
-from fleet import motion
+from fleet import live, motion
 from fleet.execution import coordination, states
 from fleet.execution.link import RobotLink
 from fleet.models import Execution, Instruction
@@ -152,15 +152,19 @@ def go_to(session: Session, destination: dict, factor: float) -> None:
     x, y = float(destination["x"]), float(destination["y"])
     name = destination.get("name") or f"({x:g}, {y:g})"
     states.transition(session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id)
+    live.goal(session.robot, name, x, y)  # the map draws the goal until the robot is done with it
     pose = session.pose()
     limits = session.link.limits()
     distance = math.hypot(x - pose[0], y - pose[1])
-    if session.link.nav_kind:
-        nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
-        navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
-    else:
-        controller = motion.GoToGoal((x, y), limits, factor)
-        drive(session, controller, travel_time(distance, math.pi, limits, factor))
+    try:
+        if session.link.nav_kind:
+            nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
+            navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
+        else:
+            controller = motion.GoToGoal((x, y), limits, factor)
+            drive(session, controller, travel_time(distance, math.pi, limits, factor))
+    finally:
+        live.goal(session.robot, None, None, None)
 
 
 def do_task(session: Session, task: str, factor: float, where: str) -> None:
