@@ -4,6 +4,7 @@ Defaults work on a laptop with nothing installed: a SQLite file and an embedded 
 """
 
 import os
+import warnings
 from pathlib import Path
 
 from fleet.env import (
@@ -81,14 +82,20 @@ CACHES = {
     "default": {
         "BACKEND": "django.core.cache.backends.redis.RedisCache",
         "LOCATION": REDIS_URL,
-        "KEY_PREFIX": "fleet",
+        "KEY_PREFIX": os.environ.get("FLEET_REDIS_PREFIX", "fleet"),
     }
 }
 
 CHANNEL_LAYERS = {
     "default": {
         "BACKEND": "channels_redis.core.RedisChannelLayer",
-        "CONFIG": {"hosts": [channels_host(REDIS_URL)], "capacity": 1000, "expiry": 10},
+        "CONFIG": {
+            "hosts": [channels_host(REDIS_URL)],
+            "capacity": 1000,
+            "expiry": 10,
+            # Separate runs on one Redis (e.g. two test runs) never hear each other's pushes.
+            "prefix": os.environ.get("FLEET_REDIS_PREFIX", "fleet") + ":asgi",
+        },
     }
 }
 
@@ -123,6 +130,8 @@ STATIC_URL = "static/"
 STATICFILES_DIRS = [BASE_DIR / "static"]
 STATIC_ROOT = VAR_DIR / "static"
 STATIC_ROOT.mkdir(exist_ok=True)
+# WhiteNoise serves files with a synchronous iterator; under ASGI Django says so once per file. Harmless here.
+warnings.filterwarnings("ignore", message="StreamingHttpResponse must consume synchronous iterators")
 WHITENOISE_USE_FINDERS = True  # serve static/ straight from the apps: no collectstatic step to forget
 
 LOGGING = {

@@ -23,6 +23,7 @@ def main() -> int:
             "make test: browser tests NOT run: no chromium at /usr/bin/chromium (set FLEET_CHROMIUM or apt-get install chromium)"
         )
         args = ["-m", "not browser", *args]
+    os.environ.setdefault("FLEET_REDIS_PREFIX", f"test{os.getpid()}")  # this run's own keys and groups
     command = [sys.executable, "-m", "pytest", *args]
     if not os.environ.get("REDIS_URL"):
         command = [sys.executable, "-m", "fleet.embedded_redis", "exec", "--", *command]
