@@ -105,6 +105,7 @@ CELERY_TASK_ACKS_LATE = True
 CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
 CELERY_TASK_DEFAULT_QUEUE = "instructions"
+CELERY_IMPORTS = ["fleet.experiments"]  # tasks outside the apps' tasks.py modules
 CELERY_TASK_ROUTES = {
     "robots.tasks.*": {"queue": "registration"},
     "simworker.tasks.*": {"queue": "sim"},

@@ -2,7 +2,7 @@
 
 from django.urls import path
 
-from fleet import views
+from fleet import views, views_experiments
 
 urlpatterns = [
     path("", views.dashboard, name="dashboard"),
@@ -15,5 +15,6 @@ urlpatterns = [
     path("schedules/", views.schedules, name="schedules"),
     path("history/", views.history, name="history"),
     path("audit/", views.audit, name="audit"),
+    path("experiments/", views_experiments.experiments, name="experiments"),
     path("control/stop/", views.stop, name="stop"),
 ]
