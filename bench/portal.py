@@ -153,8 +153,8 @@ class Portal:
         path = self.tmp / f"{name}.log"
         return path.read_text(errors="replace")[-chars:] if path.exists() else ""
 
-    def close(self) -> None:
-        """Stop the processes this portal started (by their ids), Redis, and remove the temp dir."""
+    def close(self, keep: bool = False) -> None:
+        """Stop the processes this portal started (by their ids), Redis, and remove the temp dir (unless kept)."""
         for proc in self.procs.values():
             if proc.poll() is None:
                 proc.terminate()
@@ -167,4 +167,7 @@ class Portal:
             from fleet import embedded_redis
 
             embedded_redis.stop(self.redis, self.socket)
-        shutil.rmtree(self.tmp, ignore_errors=True)
+        if keep:
+            print(f"[bench] kept {self.tmp} (web.log, worker.log)", flush=True)
+        else:
+            shutil.rmtree(self.tmp, ignore_errors=True)

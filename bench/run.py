@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 import traceback
 from pathlib import Path
@@ -246,15 +247,24 @@ class Bench:
             },
         )
 
-    async def run_all(self) -> None:
-        await self.guarded("exp1_direct", "direct publish, Table 3", self.exp1_direct())
-        await self.guarded("exp2_portal", "portal, hand-registered, Table 4", self.portal_grid(4, False))
-        await self.guarded("exp3_portal_identified", "portal, identified, Table 5", self.portal_grid(5, True))
-        await self.guarded("exp4_scale_direct", "1..N robots, direct", self.exp4_scale_direct())
-        await self.guarded("latency", "command latency portal vs direct", self.latency())
+    def plan(self) -> list[tuple[str, str, object]]:
+        """Every experiment in run order: (name, title, coroutine function)."""
+        plan = [
+            ("exp1_direct", "direct publish, Table 3", self.exp1_direct),
+            ("exp2_portal", "portal, hand-registered, Table 4", lambda: self.portal_grid(4, False)),
+            ("exp3_portal_identified", "portal, identified, Table 5", lambda: self.portal_grid(5, True)),
+            ("exp4_scale_direct", "1..N robots, direct", self.exp4_scale_direct),
+            ("latency", "command latency portal vs direct", self.latency),
+        ]
         for name in ("exp4_portal", "exp5_move", "exp6_sequence", "exp7_success", "stop_queued"):
-            await self.guarded(name, name, self.needs_execution(name))
-        await self.guarded("live_staleness", "live push staleness", self.staleness())
+            plan.append((name, name, lambda n=name: self.needs_execution(n)))
+        plan.append(("live_staleness", "live push staleness", self.staleness))
+        return plan
+
+    async def run_all(self, only: set[str] | None = None) -> None:
+        for name, title, make in self.plan():
+            if not only or name in only:
+                await self.guarded(name, title, make())
         for client in self.clients.values():
             await client.close()
 
@@ -383,16 +393,18 @@ def _component_result(name: str, title: str, keys, proc) -> dict:
     )
 
 
-async def bench_async(mode: str, portal) -> dict:
+async def bench_async(mode: str, portal, only: set[str] | None = None) -> dict:
     from simworker.testing import running_world
 
     with running_world("paper", extra=MODES[mode]["extra"]) as sim:
         bench = Bench(mode, sim, portal)
-        await bench.run_all()
+        await bench.run_all(only)
         return bench.results
 
 
-def run_fleet(mode: str, no_components: bool = False) -> dict:
+def run_fleet(
+    mode: str, no_components: bool = False, only: set[str] | None = None, keep: bool = False
+) -> dict:
     """Set the private portal up (synchronously: Django's ORM refuses an event loop), then run the bench."""
     from bench.portal import Portal
 
@@ -400,9 +412,9 @@ def run_fleet(mode: str, no_components: bool = False) -> dict:
     try:
         portal.setup()
         results = {} if no_components else run_components(mode, MODES[mode]["component_timeout"], portal.env)
-        return results | asyncio.run(bench_async(mode, portal))
+        return results | asyncio.run(bench_async(mode, portal, only))
     finally:
-        portal.close()
+        portal.close(keep=keep)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -414,10 +426,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--no-components", action="store_true", help="skip the component benches (for a re-run)"
     )
+    parser.add_argument("--only", default="", help="comma-separated experiment names (a debugging re-run)")
+    parser.add_argument("--keep", action="store_true", help="keep the portal's temp dir (its logs)")
     args = parser.parse_args(argv)
     mode = args.mode or "full"
     started = time.time()
-    results = run_fleet(mode, args.no_components)
+    only = {n for n in args.only.split(",") if n} or None
+    if only and args.out == RESULTS:
+        args.out = Path(tempfile.mkdtemp(prefix="bench-only-"))  # a partial run never replaces the results
+    results = run_fleet(mode, args.no_components or bool(only), only, args.keep)
     meta = {"mode": mode, "seconds": round(time.time() - started), "at": time.strftime("%Y-%m-%d %H:%M:%S")}
     summary = report.write_all(results, args.out, mode, meta)
     print(report.render_headline(summary))

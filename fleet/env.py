@@ -96,9 +96,13 @@ def celery_broker_url(redis_url: str) -> str:
     return redis_url
 
 
-def channels_host(redis_url: str) -> str:
-    """channels-redis takes redis:// and unix:// URLs as they are."""
-    return redis_url
+CHANNELS_SOCKET_TIMEOUT = 30  # s: above channels-redis's 5 s BZPOPMIN, or an idle consumer dies
+
+
+def channels_host(redis_url: str) -> dict:
+    """channels-redis takes redis:// and unix:// URLs as they are; redis-py 8's default 5 s socket timeout
+    equals channels-redis's 5 s blocking receive, so an idle WebSocket consumer crashed with TimeoutError."""
+    return {"address": redis_url, "socket_timeout": CHANNELS_SOCKET_TIMEOUT}
 
 
 def env_secret_key(name: str, key_file: Path) -> str:
