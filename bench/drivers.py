@@ -82,7 +82,16 @@ class PortalDriver:
         self.ws = ws  # a connected websockets client, logged in by session cookie
         self.robot_ids = robot_ids
         self.held = _Held()
-        self.replies: list[dict] = []
+        self.replies: list[dict] = []  # the portal's command results (pushes are read and dropped)
+        self._reader = asyncio.create_task(self._drain())
+
+    async def _drain(self) -> None:
+        """Read everything the portal pushes, so a full socket buffer never holds the commands back."""
+        async for raw in self.ws:
+            msg = json.loads(raw)
+            if msg.get("type") == "command.result":
+                self.replies.append(msg)
+                del self.replies[:-1000]
 
     async def _send(self, payload: dict) -> None:
         await self.ws.send(json.dumps(payload))
@@ -107,3 +116,5 @@ class PortalDriver:
 
     async def close(self) -> None:
         self.held.release_all()
+        self._reader.cancel()
+        await self.ws.close()
