@@ -17,8 +17,14 @@ $(STAMP): pyproject.toml requirements.lock
 run: $(STAMP)
 	$(PY) -m fleet.run
 
+JS_PROBE := tests/simworker/js/node_modules/.package-lock.json
+
+# The npm roslib client the simulator is tested against (skipped, with a note, where npm is missing).
+$(JS_PROBE): tests/simworker/js/package.json
+	-command -v npm >/dev/null && npm install --silent --no-audit --no-fund --prefix tests/simworker/js
+
 ## test: set up everything and run the whole test suite (browser tests where chromium exists)
-test: $(STAMP)
+test: $(STAMP) $(JS_PROBE)
 	$(PY) -m fleet.testrun
 
 ## bench: the paper's experiments and the scale benchmarks; results under bench/results/ (BENCH=quick: under 5 min)

@@ -4,6 +4,7 @@ from datetime import datetime, time
 
 from django.shortcuts import get_object_or_404
 from ninja import Router, Schema
+from ninja.responses import Status
 from ninja.errors import HttpError
 from pydantic import Field, model_validator
 
@@ -97,7 +98,7 @@ def create_slot(request, payload: TimeSlotIn):
     require_perm(request, SCHEDULE_PERM)
     slot = TimeSlot.objects.create(**_slot_fields(payload))
     audit.record(request.user, "schedule.create", str(slot))
-    return 201, slot
+    return Status(201, slot)
 
 
 @router.put("/schedules/{slot_id}", response=TimeSlotOut, tags=["schedules"])
@@ -117,7 +118,7 @@ def delete_slot(request, slot_id: int):
     slot = get_object_or_404(TimeSlot, pk=slot_id)
     audit.record(request.user, "schedule.delete", str(slot))
     slot.delete()
-    return 204, None
+    return Status(204, None)
 
 
 @router.get("/instructions", response=list[InstructionOut], tags=["instructions"])
@@ -138,4 +139,4 @@ def create_instruction(request, payload: InstructionIn):
     require_perm(request, CONTROL_PERM)
     from fleet.instructions import submit
 
-    return 201, submit(payload.text, request.user, source="api")
+    return Status(201, submit(payload.text, request.user, source="api"))
