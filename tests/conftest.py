@@ -55,3 +55,17 @@ def client_for(client):
         return client
 
     return _login
+
+
+@pytest.fixture(autouse=True)
+def fresh_channel_layer():
+    """Give every test its own channel layer instance.
+
+    channels-redis binds receive() to the event loop that first used it; a test that served WebSockets from
+    another loop (a live server thread) would otherwise leave the process's layer bound to a dead loop.
+    """
+    from channels.layers import channel_layers
+
+    channel_layers.backends.clear()
+    yield
+    channel_layers.backends.clear()
