@@ -33,6 +33,7 @@ async def _connect(path: str, user=None) -> WebsocketCommunicator:
 async def test_anonymous_is_closed_with_4401(fleet):
     communicator = await _connect("/ws/fleet/")
     assert await communicator.receive_output(timeout=5) == {"type": "websocket.close", "code": 4401}
+    await communicator.disconnect()
 
 
 async def test_user_without_view_permission_is_closed_with_4403(fleet):
@@ -41,11 +42,13 @@ async def test_user_without_view_permission_is_closed_with_4403(fleet):
     nobody = await sync_to_async(User.objects.create_user)("nobody", password="x" * 12)
     communicator = await _connect("/ws/fleet/", nobody)
     assert await communicator.receive_output(timeout=5) == {"type": "websocket.close", "code": 4403}
+    await communicator.disconnect()
 
 
 async def test_unknown_robot_is_closed_with_4404(viewer, fleet):
     communicator = await _connect("/ws/robots/99999/", viewer)
     assert await communicator.receive_output(timeout=5) == {"type": "websocket.close", "code": 4404}
+    await communicator.disconnect()
 
 
 async def test_snapshot_first_then_deltas(viewer, operator, fleet):
