@@ -4,8 +4,8 @@ from datetime import datetime, time
 
 from django.shortcuts import get_object_or_404
 from ninja import Router, Schema
-from ninja.responses import Status
 from ninja.errors import HttpError
+from ninja.responses import Status
 from pydantic import Field, model_validator
 
 from fleet import audit

@@ -184,4 +184,3 @@ def load_terms() -> Terms:
     keywords = [KeywordTerm(k.action, k.keyword, k.weight) for k in TopicKeyword.objects.all()]
     models_ = sorted(set(Robot.objects.exclude(model="").values_list("model", "drive")))
     return Terms(actions, classes, concepts, synonyms, keywords, models_)
-
