@@ -113,29 +113,23 @@ class Portal:
                 time.sleep(0.2)
         raise RuntimeError(f"portal web server did not answer within {timeout:g} s (log: {self.tmp}/web.log)")
 
-    def start_worker(self, queues: str = "instructions,control,registration", concurrency: int = 2) -> None:
+    def start_worker(self) -> None:
+        """Celery as `make run` has it: a threaded instructions worker (instructions block a thread while robots
+        move) and a separate control worker, so stops and registrations never wait behind an instruction."""
         if "worker" in self.procs:
             return
-        cmd = [
-            sys.executable,
-            "-m",
-            "celery",
-            "-A",
-            "fleet",
+        common = ["-l", "warning", "--without-gossip", "--without-mingle", "--without-heartbeat"]
+        celery = [sys.executable, "-m", "celery", "-A", "fleet", "worker"]
+        self._spawn(
             "worker",
-            "-Q",
-            queues,
-            "-c",
-            str(concurrency),
-            "-l",
-            "warning",
-            "--without-gossip",
-            "--without-mingle",
-            "--without-heartbeat",
-        ]
-        self._spawn("worker", cmd)
+            [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "32", *common],
+        )
+        self._spawn(
+            "control", [*celery, "-n", "control@%h", "-Q", "control,registration", "-c", "1", *common]
+        )
         time.sleep(2.0)
         self._check_alive("worker")
+        self._check_alive("control")
 
     def _spawn(self, name: str, cmd: list[str]) -> None:
         log = open(self.tmp / f"{name}.log", "wb")  # noqa: SIM115 - lives as long as the process

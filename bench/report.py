@@ -126,6 +126,37 @@ def render_headline(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def render_latency(summary: dict) -> list[str]:
+    """Command issued -> received at the robot's endpoint: the portal against a direct publish, same run."""
+    lines = [
+        "## Command latency: portal against direct publish (same run)",
+        "",
+        "| robots moving | direct p50 / p99 (ms) | portal p50 / p99 (ms) | ratio p50 | ratio p99 |",
+        "|---|---|---|---|---|",
+    ]
+    for n in ("1", "10", "100"):
+        d, p = summary["direct_latency_ms"][n], summary["command_latency_ms"][n]
+        ratios = [_fmt(_ratio(p[k], d[k]), 1) for k in ("p50", "p99")]
+        lines.append(
+            f"| {n} | {_fmt(d['p50'], 1)} / {_fmt(d['p99'], 1)} | {_fmt(p['p50'], 1)} / {_fmt(p['p99'], 1)} | "
+            + " | ".join(ratios)
+            + " |"
+        )
+    stop = summary["stop_latency_ms"]
+    lines += [
+        "",
+        f"Stop through the portal's WebSocket with {_fmt(stop['queued'])} instructions still queued, "
+        f"{_fmt(stop['robots'])} robots moving: stop issued -> zero Twist at each endpoint p50 "
+        f"{_fmt(stop['p50'], 1)} ms, p99 {_fmt(stop['p99'], 1)} ms.",
+        "",
+    ]
+    return lines
+
+
+def _ratio(a, b):
+    return a / b if a is not None and b else None
+
+
 def render_table(table: paper.PaperTable, results: dict[str, dict]) -> str:
     """The paper's table with 'paper / ours' in every cell, same rows and columns."""
     ours = our_table(table, results)
@@ -162,6 +193,10 @@ def render_markdown(results: dict[str, dict], summary: dict, mode: str, plots: l
         render_headline(summary),
         "",
     ]
+    parts += render_latency(summary)
+    missed = [(n, r["missed"]) for n, r in results.items() if r.get("missed")]
+    if missed:
+        parts += ["## Goals missed: why", ""] + [f"- **{n}**: {text}" for n, text in missed] + [""]
     parts += ["## Status of each experiment", "", "| experiment | status | why / notes |", "|---|---|---|"]
     for name, result in results.items():
         why = "; ".join(filter(None, [result.get("reason", ""), *result.get("notes", [])]))
