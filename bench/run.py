@@ -51,7 +51,7 @@ MODES = {
         "time_scale": 1.0,
         "success_trials": 20,
         "stop_repeats": 10,
-        "exec_limit_s": 1200,
+        "exec_limit_s": 3600,
     },
 }
 COMPONENT_FILES = {"interpreter_throughput": ("interpreter_throughput.json", "interpreter.json")}
