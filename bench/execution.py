@@ -255,8 +255,9 @@ def success_why(rates: dict, outcomes: list[dict], time_scale: float) -> str:
         f"success rate without navigation {rates['no_nav']}, with navigation {rates['nav']}. Failed trials: "
         + "; ".join(failed[:12])
         + ". Without navigation the execution engine's go-to-goal controller drives straight at the goal with no "
-        "obstacle avoidance, so a goal behind an obstacle of the paper world (e.g. Husky from its start towards "
-        "D or E, blocked near (2.6, -0.4)) is never reached: a limit of the controller, not of the portal; the "
+        "obstacle avoidance, so a goal behind an obstacle of the paper world is never reached (in a separate "
+        "check, Husky driven from its start pose towards D stopped against an obstacle near (2.6, -0.4)): a "
+        "limit of the controller, not of the portal, and results depend on where the previous trial ended; the "
         "paper's own rates without navigation are 0.45-0.95. With navigation, failures are the simulated "
         f"move_base reporting the goal failed or running over the limit (the simulator ran {time_scale:g}x "
         "faster than real time; `navigate robot1 to C`, which failed once here, succeeded alone at that scale)."
