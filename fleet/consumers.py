@@ -137,7 +137,9 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         user = self.scope["user"]
         if not user.is_authenticated:
             return
-        await self.send_json(await database_sync_to_async(run_command)(user, content))
+        # Not thread-sensitive: one socket's commands do not wait behind every other socket's on one thread.
+        command = database_sync_to_async(run_command, thread_sensitive=False)
+        await self.send_json(await command(user, content))
 
     async def forward(self, event):
         await self.send_json(event)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from concurrent.futures import ThreadPoolExecutor
 
+from django.core.cache import cache
 from django.utils import timezone
 
 from fleet import audit, motion
@@ -74,6 +75,9 @@ def cancel_waiting(robots, reason: str) -> int:
     return done
 
 
+HELD_REPEAT_S = 2  # a held button repeats every 0.2 s; a longer gap is a new press
+
+
 def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
     """Publish one velocity command within the robot's limits; return what was sent.
 
@@ -90,5 +94,18 @@ def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
         raise LinkError(f"{robot.name}: no move topic is bound")
     message = motion.velocity_message(v, w, move.message_type, robot.ros_version)
     client_for(robot).publish(move.target, message, move.message_type or "geometry_msgs/Twist")
-    audit.record(user, "teleop", robot.name, linear=v, angular=w)
+    _audit_teleop(user, robot, v, w)
     return v, w
+
+
+def _audit_teleop(user, robot, v: float, w: float) -> None:
+    """Audit each change of a person's teleop command, not each 5 Hz repeat of a held button.
+
+    The trail still says who drove which robot at what speed from when to when; the repeats would only add
+    a database write to every command on the hot path. After HELD_REPEAT_S without a command, the next one
+    is a new press and audited again.
+    """
+    key = f"teleop:last:{robot.pk}:{getattr(user, 'pk', None)}"
+    if cache.get(key) != [v, w]:
+        audit.record(user, "teleop", robot.name, linear=v, angular=w)
+    cache.set(key, [v, w], timeout=HELD_REPEAT_S)

@@ -21,6 +21,19 @@ def test_teleop_publishes_within_the_robot_limits_and_is_audited(turtle_world, o
     wait_for(lambda: sim.call(lambda: sim.fleet.robots["turtlebot"].body.cmd).vx == 0.0, what="zero")
 
 
+def test_a_held_teleop_button_is_audited_once_per_change(turtle_world, operator):
+    for _ in range(5):  # a held button repeats the same command at 5 Hz
+        teleop("turtlebot", operator, 0.1, 0.0)
+    teleop("turtlebot", operator, 0.1, 0.5)
+    teleop("turtlebot", operator, 0.0, 0.0)
+    audited = AuditEntry.objects.filter(action="teleop", user=operator).order_by("at")
+    assert [(e.details["linear"], e.details["angular"]) for e in audited] == [
+        (0.1, 0.0),
+        (0.1, 0.5),
+        (0.0, 0.0),
+    ]
+
+
 def test_teleop_and_stop_respect_leases_and_roles(turtle_world, operator, second_operator, viewer):
     with pytest.raises(ControlRefused, match="may only view"):
         teleop("turtlebot", viewer, 0.1, 0.0)
