@@ -260,7 +260,9 @@ def success_why(rates: dict, outcomes: list[dict], time_scale: float) -> str:
         "limit of the controller, not of the portal, and results depend on where the previous trial ended; the "
         "paper's own rates without navigation are 0.45-0.95. With navigation, failures are the simulated "
         f"move_base reporting the goal failed or running over the limit (the simulator ran {time_scale:g}x "
-        "faster than real time; `navigate robot1 to C`, which failed once here, succeeded alone at that scale)."
+        "faster than real time). `navigate robot1 to C` (from B, while Husky and TIAGo drive to F and I) failed "
+        "in every quick run so far, yet B then C with robot1 alone at the same scale succeeds: not investigated "
+        "further (the simulated navigation stack's planner, simworker/navigation.py)."
     )
 
 
