@@ -260,9 +260,10 @@ def success_why(rates: dict, outcomes: list[dict], time_scale: float) -> str:
         "limit of the controller, not of the portal, and results depend on where the previous trial ended; the "
         "paper's own rates without navigation are 0.45-0.95. With navigation, failures are the simulated "
         f"move_base reporting the goal failed or running over the limit (the simulator ran {time_scale:g}x "
-        "faster than real time). `navigate robot1 to C` (from B, while Husky and TIAGo drive to F and I) failed "
-        "in every quick run so far, yet B then C with robot1 alone at the same scale succeeds: not investigated "
-        "further (the simulated navigation stack's planner, simworker/navigation.py)."
+        "faster than real time). `navigate robot1 to C` fails in every quick run: TIAGo, parked at its goal I "
+        "(-1, 1) of the same slot, stands on robot1's way from B (-2, 2) to C (2, -2); robot1 stops against it "
+        "near (-1.2, 1.3) and the simulated move_base aborts the goal. A conflict "
+        "of the paper's Table 12 goals in this world, reproduced outside the bench with the same instructions."
     )
 
 
