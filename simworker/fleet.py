@@ -9,10 +9,10 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+from fleet.planning import Planner
 from simworker import rosapi
 from simworker.graph import Graph
 from simworker.models_catalog import model
-from simworker.navigation import Planner
 from simworker.navstack import MoveBase, Nav2
 from simworker.physics import DEFAULT_DT, Physics
 from simworker.robot import SimRobot

@@ -16,6 +16,7 @@ from django.utils import timezone
 from fleet import live, motion
 from fleet.execution import coordination, states
 from fleet.execution.link import RobotLink
+from fleet.execution.route import route
 from fleet.models import Execution, Instruction
 from fleet.statemachine import Event
 
@@ -148,6 +149,9 @@ def travel_time(distance: float, turn: float, limits: motion.Limits, factor: flo
     return 3 * (distance / (limits.linear * factor) + turn / (limits.angular * factor)) + 10
 
 
+WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
+
+
 def go_to(session: Session, destination: dict, factor: float) -> None:
     x, y = float(destination["x"]), float(destination["y"])
     name = destination.get("name") or f"({x:g}, {y:g})"
@@ -161,10 +165,20 @@ def go_to(session: Session, destination: dict, factor: float) -> None:
             nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
             navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
         else:
-            controller = motion.GoToGoal((x, y), limits, factor)
-            drive(session, controller, travel_time(distance, math.pi, limits, factor))
+            drive_route(session, route(session.robot, pose[:2], (x, y)), limits, factor)
     finally:
         live.goal(session.robot, None, None, None)
+
+
+def drive_route(session: Session, waypoints: list, limits: motion.Limits, factor: float) -> None:
+    """Drive leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal."""
+    for index, (x, y) in enumerate(waypoints):
+        pose = session.pose()
+        last = index == len(waypoints) - 1
+        tolerance = motion.TOLERANCE if last else WAYPOINT_TOLERANCE
+        controller = motion.GoToGoal((x, y), limits, factor, tolerance)
+        distance = math.hypot(x - pose[0], y - pose[1])
+        drive(session, controller, travel_time(distance, math.pi, limits, factor))
 
 
 def do_task(session: Session, task: str, factor: float, where: str) -> None:

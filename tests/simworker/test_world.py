@@ -4,8 +4,8 @@ import math
 
 import pytest
 
+from fleet.planning import Planner
 from simworker.models_catalog import model
-from simworker.navigation import Planner
 from simworker.world import WorldFormatError, load_world
 from simworker.worlds.make_paper_map import build
 

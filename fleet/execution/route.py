@@ -1,0 +1,64 @@
+"""Routes on the fleet's map for robots without a navigation stack: around walls and obstacles, not through.
+
+The paper's Figure 7 drives straight at the goal; a robot then stops at the first obstacle between. Here the
+portal plans on the occupancy grid it already has (fleet.planning, the same A* the simulated nav stacks use),
+inflated by the robot's footprint, and the Figure 7 controller drives leg by leg.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+
+from django.conf import settings
+
+from fleet.mapfile import OccupancyGrid
+from fleet.models import Map
+from fleet.planning import Planner
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RADIUS = 0.15  # m, when a robot has no footprint
+
+
+def footprint_radius(footprint) -> float:
+    """Half the smaller extent of the footprint polygon: the radius the robot needs to pass a gap."""
+    try:
+        xs, ys = [float(p[0]) for p in footprint], [float(p[1]) for p in footprint]
+    except (TypeError, ValueError, IndexError):
+        return DEFAULT_RADIUS
+    if len(xs) < 3:
+        return DEFAULT_RADIUS
+    return min(max(xs) - min(xs), max(ys) - min(ys)) / 2
+
+
+def fleet_map() -> Map | None:
+    """The map robots move on: the current world's, else the newest one."""
+    return (
+        Map.objects.filter(name=settings.FLEET_WORLD).first() or Map.objects.order_by("-created_at").first()
+    )
+
+
+@functools.lru_cache(maxsize=16)
+def _planner(map_id: int, version: str, radius: float) -> Planner:
+    """One planner per map version and robot size, per process (building one inflates the whole grid)."""
+    row = Map.objects.get(pk=map_id)
+    grid = OccupancyGrid(
+        row.resolution, row.width, row.height, (row.origin_x, row.origin_y, row.origin_yaw), row.cells()
+    )
+    return Planner(grid, radius)
+
+
+def route(robot, start: tuple[float, float], goal: tuple[float, float]) -> list[tuple[float, float]]:
+    """Waypoints from start to goal around what the map shows; just [goal] without a map or a path."""
+    row = fleet_map()
+    if row is None:
+        return [goal]
+    planner = _planner(row.pk, row.created_at.isoformat(), round(footprint_radius(robot.footprint), 2))
+    path = planner.plan(start, goal)
+    if path is None:
+        log.warning(
+            "%s: no free path on map %s from %s to %s; driving straight", robot.name, row.name, start, goal
+        )
+        return [goal]
+    return path

@@ -1,0 +1,57 @@
+"""Robots without a navigation stack drive around what the map shows, not into it."""
+
+import math
+
+import pytest
+
+from fleet.execution.route import footprint_radius, route
+from fleet.instructions import submit
+from fleet.worlds import load_world_into_db
+from robots.models import Robot
+from tests.execution.helpers import parse, step, wait_final
+
+CRATE = ((1.4, 2.6), (0.1, 0.5))  # the paper world's crate (simworker/worlds/make_paper_map.py)
+START, BEHIND_CRATE = (-2.0, -0.5), (3.0, 0.8)  # the straight line between clips the crate
+
+
+def crosses_crate(a, b, margin: float) -> bool:
+    (x0, x1), (y0, y1) = CRATE
+    for i in range(201):
+        x, y = a[0] + (b[0] - a[0]) * i / 200, a[1] + (b[1] - a[1]) * i / 200
+        if x0 - margin <= x <= x1 + margin and y0 - margin <= y <= y1 + margin:
+            return True
+    return False
+
+
+def test_footprint_radius_is_half_the_narrow_side():
+    assert footprint_radius([[-0.5, -0.3], [-0.5, 0.3], [0.5, 0.3], [0.5, -0.3]]) == pytest.approx(0.3)
+    assert footprint_radius([]) == pytest.approx(0.15)
+    assert footprint_radius("garbage") == pytest.approx(0.15)
+
+
+@pytest.mark.django_db
+def test_route_goes_around_the_crate_and_ends_at_the_goal():
+    load_world_into_db("paper")
+    robot = Robot(name="tb", footprint=[[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]])
+    assert crosses_crate(START, BEHIND_CRATE, 0.1)  # the paper's Figure 7 would drive into it
+    waypoints = route(robot, START, BEHIND_CRATE)
+    assert len(waypoints) >= 2
+    assert waypoints[-1] == BEHIND_CRATE
+    legs = zip([START, *waypoints], waypoints, strict=False)
+    assert not any(crosses_crate(a, b, 0.1) for a, b in legs)
+
+
+@pytest.mark.django_db
+def test_without_a_map_the_route_is_the_straight_line():
+    assert route(Robot(name="tb"), START, BEHIND_CRATE) == [BEHIND_CRATE]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(90)
+def test_turtlebot_reaches_a_goal_behind_the_crate(turtle_world, fleet_admin):
+    instruction = submit(
+        "move turtlebot to X", fleet_admin, parse=parse(step(["turtlebot"], *BEHIND_CRATE, "X"))
+    )
+    assert wait_final(instruction, timeout=75).status == "succeeded"
+    x, y, _ = turtle_world.pose("turtlebot")
+    assert math.dist((x, y), BEHIND_CRATE) < 0.15
