@@ -13,6 +13,8 @@ from fleet.planning import Planner
 XY_TOLERANCE = 0.15
 YAW_TOLERANCE = 0.1
 STUCK_SECONDS = 10.0
+MAX_REPLANS = 2  # replans around other robots before a stuck goal is aborted
+LOCAL_COSTMAP_M = 3.0  # robots closer than this are seen (the local costmap's size)
 ACTIVE, PREEMPTED, SUCCEEDED, ABORTED = 1, 2, 3, 4  # actionlib_msgs/GoalStatus
 
 
@@ -30,6 +32,7 @@ class Navigator:
         self.goal: tuple[float, float, float | None] | None = None
         self.on_done: Callable[[int, str], None] | None = None
         self.progress = (math.inf, 0.0)
+        self.replans = 0
 
     @property
     def active(self) -> bool:
@@ -44,6 +47,7 @@ class Navigator:
             on_done(ABORTED, "Failed to find a valid plan")
             return False
         self.goal, self.path, self.on_done = (x, y, yaw), path, on_done
+        self.replans = 0
         self.progress = (math.inf, self.robot.physics.time)
         return True
 
@@ -99,4 +103,24 @@ class Navigator:
         if measure < best - 0.05:
             self.progress = (measure, now)
         elif now - since > STUCK_SECONDS:
+            if self.replans < MAX_REPLANS and self._replan_around_robots():
+                self.replans += 1
+                self.progress = (math.inf, now)
+                return
             self.stop(ABORTED, "Robot is stuck: no progress")
+
+    def _replan_around_robots(self) -> bool:
+        """Plan again with the other robots as obstacles, as move_base's costmap would see them by laser."""
+        x, y, _ = self.robot.pose()
+        others = [
+            (ox, oy, body.profile.inscribed_radius)
+            for name, body in self.robot.physics.robots.items()
+            if name != self.robot.body.name
+            for ox, oy, _ in [body.pose()]
+            if math.dist((x, y), (ox, oy)) < LOCAL_COSTMAP_M
+        ]
+        path = self.planner.plan((x, y), self.goal[:2], avoid=others) if others else None
+        if path is None:
+            return False
+        self.path = path
+        return True
