@@ -5,7 +5,7 @@ import math
 from fleet.planning import Planner
 from simworker.world import load_world
 
-B, C, I = (-2.0, 2.0), (2.0, -2.0), (-1.0, 1.0)  # the straight line from B to C passes through I
+B, C, SPOT_I = (-2.0, 2.0), (2.0, -2.0), (-1.0, 1.0)  # the straight line from B to C passes through I
 
 
 def clearance(path, start, point) -> float:
@@ -21,11 +21,11 @@ def clearance(path, start, point) -> float:
 def test_plan_is_straight_on_a_free_map_and_bends_around_a_robot_it_is_told_of():
     planner = Planner(load_world("paper").map, 0.105)
     assert planner.plan(B, C) == [C]  # nothing on the map between B and C
-    around = planner.plan(B, C, avoid=[(*I, 0.3)])  # TIAGo parked at I
+    around = planner.plan(B, C, avoid=[(*SPOT_I, 0.3)])  # TIAGo parked at I
     assert around[-1] == C and len(around) >= 2
-    assert clearance(around, B, I) > 0.3 + 0.105
+    assert clearance(around, B, SPOT_I) > 0.3 + 0.105
 
 
 def test_a_goal_inside_another_robot_is_unreachable():
     planner = Planner(load_world("paper").map, 0.105)
-    assert planner.plan(B, I, avoid=[(*I, 0.3)]) is None
+    assert planner.plan(B, SPOT_I, avoid=[(*SPOT_I, 0.3)]) is None
