@@ -7,6 +7,7 @@ exactly as the pages' POST views check them (both call ``run_command``).
 
 import logging
 import math
+from typing import NamedTuple
 
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncJsonWebsocketConsumer
@@ -19,6 +20,13 @@ log = logging.getLogger(__name__)
 
 class CommandError(Exception):
     """A command that is refused or malformed; the message says why, in words."""
+
+
+class CommandDone(NamedTuple):
+    """A command's words for the person, and the teleop grant its repeats may reuse."""
+
+    detail: str
+    grant: object
 
 
 def _int_list(ids) -> list[int]:
@@ -84,15 +92,20 @@ def command_teleop(user, content: dict) -> str:
         check_command(user, robot)
     except ControlRefused as exc:
         raise CommandError(str(exc)) from exc
-    _call(_control().teleop, robot, user, linear, angular)
-    return f"{robot.name}: linear {linear:.2f} m/s, angular {angular:.2f} rad/s"
+    control = _control()
+    grant = _call(control.teleop_grant, robot, user)
+    _call(control.teleop_with, grant, user, linear, angular)
+    return CommandDone(f"{robot.name}: linear {linear:.2f} m/s, angular {angular:.2f} rad/s", grant)
 
 
 COMMANDS = {"stop": command_stop, "teleop": command_teleop}
 
 
-def run_command(user, content) -> dict:
-    """Run one browser command; the reply says whether it was done and why not."""
+def run_command(user, content, with_grant: bool = False) -> dict:
+    """Run one browser command; the reply says whether it was done and why not.
+
+    with_grant: a teleop's reply carries its grant under "grant" (the socket keeps it; never sent on).
+    """
     name = content.get("command") if isinstance(content, dict) else None
     handler = COMMANDS.get(name)
     reply = {"type": "command.result", "command": name, "ref": content.get("ref") if name else None}
@@ -105,6 +118,9 @@ def run_command(user, content) -> dict:
 
         audit.record(user, "command.refused", name, reason=str(exc))
         return {**reply, "ok": False, "detail": str(exc)}
+    if isinstance(detail, CommandDone):
+        grant = {"grant": detail.grant} if with_grant else {}
+        return {**reply, "ok": True, "detail": detail.detail, **grant}
     return {**reply, "ok": True, "detail": detail}
 
 
@@ -137,9 +153,43 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         user = self.scope["user"]
         if not user.is_authenticated:
             return
-        # Not thread-sensitive: one socket's commands do not wait behind every other socket's on one thread.
-        command = database_sync_to_async(run_command, thread_sensitive=False)
-        await self.send_json(await command(user, content))
+        reply = await self.held_teleop(user, content)
+        if reply is None:
+            # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
+            command = database_sync_to_async(run_command, thread_sensitive=False)
+            reply = await command(user, content, with_grant=True)
+            self.remember_grant(reply)
+        await self.send_json(reply)
+
+    async def held_teleop(self, user, content) -> dict | None:
+        """A held button's repeat under this socket's fresh grant: published without the database."""
+        if not (isinstance(content, dict) and content.get("command") == "teleop"):
+            return None
+        grant = getattr(self, "grants", {}).get(content.get("robot"))
+        if grant is None or not grant.valid:
+            return None
+        try:
+            linear, angular = _number(content, "linear"), _number(content, "angular")
+            teleop_with = _control().teleop_with
+            v, w = await database_sync_to_async(teleop_with, thread_sensitive=False)(
+                grant, user, linear, angular
+            )
+        except Exception:  # anything unusual goes the full way, with its checks and its words
+            return None
+        detail = f"{grant.robot_name}: linear {v:.2f} m/s, angular {w:.2f} rad/s"
+        return {
+            "type": "command.result",
+            "command": "teleop",
+            "ref": content.get("ref"),
+            "ok": True,
+            "detail": detail,
+        }
+
+    def remember_grant(self, reply) -> None:
+        """After a teleop went the full way and was allowed, keep its grant for the repeats."""
+        grant = reply.pop("grant", None)
+        if grant is not None:
+            self.grants = {**getattr(self, "grants", {}), grant.robot_id: grant}
 
     async def forward(self, event):
         await self.send_json(event)

@@ -8,14 +8,16 @@ cancelled by their runner on its next tick), and cancels the robots' queued exec
 from __future__ import annotations
 
 import logging
+import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 from django.core.cache import cache
 from django.utils import timezone
 
 from fleet import audit, motion
 from fleet.execution import coordination
-from fleet.execution.link import LinkError, client_for, publish_zero
+from fleet.execution.link import LinkError, publish_zero
 from fleet.execution.runner import settle
 from fleet.leases import ControlRefused, check_command, check_stop
 from fleet.models import Execution
@@ -78,34 +80,80 @@ def cancel_waiting(robots, reason: str) -> int:
 HELD_REPEAT_S = 2  # a held button repeats every 0.2 s; a longer gap is a new press
 
 
-def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
-    """Publish one velocity command within the robot's limits; return what was sent.
+@dataclass(frozen=True)
+class TeleopGrant:
+    """What the checks of one teleop command established: where to publish, within which limits, until when.
 
-    Refused (ControlRefused) while an instruction drives the robot: stop it first.
+    A held button sends a command every 0.2 s; within GRANT_S the repeats reuse the grant and touch no
+    database (the portal's WebSocket keeps one per robot), so a lease taken by someone else or an instruction
+    that starts driving the robot takes effect within GRANT_S.
     """
+
+    robot_id: int
+    robot_name: str
+    endpoint: str
+    target: str
+    message_type: str
+    ros_version: int
+    max_linear: float
+    max_angular: float
+    expires: float
+
+    @property
+    def valid(self) -> bool:
+        return time.monotonic() < self.expires
+
+
+GRANT_S = 1.0
+
+
+def teleop_grant(robot, user) -> TeleopGrant:
+    """Check that the user may drive the robot now and find its move topic (ControlRefused / LinkError)."""
     robot = _robots([robot])[0]
     check_command(user, robot)
     busy = Execution.objects.filter(robot=robot, status=Execution.Status.RUNNING).first()
     if busy is not None:
         raise ControlRefused(f"{robot.name} is running instruction #{busy.instruction_id}; stop it first.")
-    v, w = motion.clamp(float(linear), robot.max_linear), motion.clamp(float(angular), robot.max_angular)
     move = robot.bindings.filter(action="move").exclude(target="").first()
     if move is None:
         raise LinkError(f"{robot.name}: no move topic is bound")
-    message = motion.velocity_message(v, w, move.message_type, robot.ros_version)
-    client_for(robot).publish(move.target, message, move.message_type or "geometry_msgs/Twist")
-    _audit_teleop(user, robot, v, w)
+    return TeleopGrant(
+        robot.pk, robot.name, robot.endpoint, move.target, move.message_type or "geometry_msgs/Twist",
+        robot.ros_version, robot.max_linear, robot.max_angular, time.monotonic() + GRANT_S,
+    )  # fmt: skip
+
+
+def teleop_with(grant: TeleopGrant, user, linear: float, angular: float) -> tuple[float, float]:
+    """Publish one velocity command under a grant, within the robot's limits; return what was sent."""
+    from robots.rosbridge.sync import get_client
+
+    v, w = motion.clamp(float(linear), grant.max_linear), motion.clamp(float(angular), grant.max_angular)
+    message = motion.velocity_message(v, w, grant.message_type, grant.ros_version)
+    try:
+        client = get_client(grant.endpoint)
+    except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the person
+        raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
+    client.publish(grant.target, message, grant.message_type)
+    _audit_teleop(user, grant, v, w)
     return v, w
 
 
-def _audit_teleop(user, robot, v: float, w: float) -> None:
+def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
+    """Publish one velocity command within the robot's limits; return what was sent.
+
+    Refused (ControlRefused) while an instruction drives the robot: stop it first.
+    """
+    return teleop_with(teleop_grant(robot, user), user, linear, angular)
+
+
+def _audit_teleop(user, grant: TeleopGrant, v: float, w: float) -> None:
     """Audit each change of a person's teleop command, not each 5 Hz repeat of a held button.
 
     The trail still says who drove which robot at what speed from when to when; the repeats would only add
     a database write to every command on the hot path. After HELD_REPEAT_S without a command, the next one
     is a new press and audited again.
     """
-    key = f"teleop:last:{robot.pk}:{getattr(user, 'pk', None)}"
+    key = f"teleop:last:{grant.robot_id}:{getattr(user, 'pk', None)}"
     if cache.get(key) != [v, w]:
-        audit.record(user, "teleop", robot.name, linear=v, angular=w)
+        audit.record(user, "teleop", grant.robot_name, linear=v, angular=w)
     cache.set(key, [v, w], timeout=HELD_REPEAT_S)

@@ -28,8 +28,12 @@ def fake_control(monkeypatch):
             calls.append(("stop", sorted(robot.name for robot in robots), user.username))
 
         @staticmethod
-        def teleop(robot, user, linear, angular):
-            calls.append(("teleop", robot.name, user.username, linear, angular))
+        def teleop_grant(robot, user):
+            return robot  # the checks are the real ones in the view; the grant only names the robot here
+
+        @staticmethod
+        def teleop_with(grant, user, linear, angular):
+            calls.append(("teleop", grant.name, user.username, linear, angular))
 
     monkeypatch.setitem(__import__("sys").modules, "fleet.control", Control)
     monkeypatch.setattr(fleet, "control", Control, raising=False)
