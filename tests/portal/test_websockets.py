@@ -157,3 +157,42 @@ async def test_unknown_and_malformed_commands_are_answered_not_crashed(operator,
     await communicator.send_json_to(["not", "an", "object"])
     assert (await communicator.receive_json_from(timeout=5))["ok"] is False
     await communicator.disconnect()
+
+
+async def test_a_held_teleop_reuses_its_grant_until_it_expires(operator, second_operator, fleet, monkeypatch):
+    """Repeats within the grant publish without the checks; after it, a lease taken meanwhile refuses them."""
+    import asyncio
+
+    from fleet import control
+
+    published = []
+
+    class FakeClient:
+        def publish(self, topic, message, type_):
+            published.append((topic, message["linear"]["x"]))
+
+    monkeypatch.setattr("robots.rosbridge.sync.get_client", lambda url: FakeClient())
+    monkeypatch.setattr(control, "GRANT_S", 0.5)
+    turtlebot = fleet["turtlebot"]
+    communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
+    await communicator.receive_json_from(timeout=5)
+
+    async def teleop(linear):
+        await communicator.send_json_to(
+            {"command": "teleop", "robot": turtlebot.pk, "linear": linear, "angular": 0}
+        )
+        while True:
+            reply = await communicator.receive_json_from(timeout=5)
+            if reply.get("type") == "command.result":
+                return reply
+
+    assert (await teleop(0.1))["ok"] is True
+    await sync_to_async(leases.take)(second_operator, turtlebot)
+    assert (await teleop(0.1))["ok"] is True  # a repeat within the grant
+    assert published == [("/cmd_vel", 0.1), ("/cmd_vel", 0.1)]
+    await asyncio.sleep(0.6)
+    refused = await teleop(0.1)
+    assert refused["ok"] is False and "held by olga" in refused["detail"]
+    assert len(published) == 2
+    assert "grant" not in refused
+    await communicator.disconnect()
