@@ -5,6 +5,7 @@ Commands from the browser (stop, teleop) are checked here against the user's rol
 exactly as the pages' POST views check them (both call ``run_command``).
 """
 
+import asyncio
 import logging
 import math
 from typing import NamedTuple
@@ -146,6 +147,8 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         await self.send_json(snapshot)
 
     async def disconnect(self, code):
+        for task in getattr(self, "chains", {}).values():
+            task.cancel()  # a held button's last repeats: the socket that wanted them is gone
         for group in getattr(self, "joined", ()):
             await self.channel_layer.group_discard(group, self.channel_name)
 
@@ -153,37 +156,49 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         user = self.scope["user"]
         if not user.is_authenticated:
             return
-        reply = await self.held_teleop(user, content)
-        if reply is None:
-            # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
-            command = database_sync_to_async(run_command, thread_sensitive=False)
-            reply = await command(user, content, with_grant=True)
-            self.remember_grant(reply)
+        if self.held_teleop_in_order(user, content):
+            return
+        # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
+        command = database_sync_to_async(run_command, thread_sensitive=False)
+        reply = await command(user, content, with_grant=True)
+        self.remember_grant(reply)
         await self.send_json(reply)
 
-    async def held_teleop(self, user, content) -> dict | None:
-        """A held button's repeat under this socket's fresh grant: published without the database."""
+    def held_teleop_in_order(self, user, content) -> bool:
+        """Take a held button's repeat under this socket's fresh grant, without the database.
+
+        Robots are driven side by side (a message for one robot does not wait for another's publish), and
+        each robot's commands still go out in the order they came. False: the command goes the full way.
+        """
         if not (isinstance(content, dict) and content.get("command") == "teleop"):
-            return None
+            return False
         grant = getattr(self, "grants", {}).get(content.get("robot"))
         if grant is None or not grant.valid:
-            return None
+            return False
         try:
             linear, angular = _number(content, "linear"), _number(content, "angular")
-            teleop_with = _control().teleop_with
-            v, w = await database_sync_to_async(teleop_with, thread_sensitive=False)(
-                grant, user, linear, angular
-            )
-        except Exception:  # anything unusual goes the full way, with its checks and its words
-            return None
+        except CommandError:
+            return False
+        chains = self.__dict__.setdefault("chains", {})
+        previous = chains.get(grant.robot_id)
+        chains[grant.robot_id] = asyncio.ensure_future(
+            self.held_teleop(previous, grant, user, linear, angular, content.get("ref"))
+        )
+        return True
+
+    async def held_teleop(self, previous, grant, user, linear, angular, ref) -> None:
+        if previous is not None:
+            await asyncio.gather(previous, return_exceptions=True)
+        reply = {"type": "command.result", "command": "teleop", "ref": ref}
+        try:
+            teleop_with = database_sync_to_async(_control().teleop_with, thread_sensitive=False)
+            v, w = await teleop_with(grant, user, linear, angular)
+        except Exception as exc:  # the link went down under the grant: said in words, grant dropped
+            self.grants.pop(grant.robot_id, None)
+            await self.send_json({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
+            return
         detail = f"{grant.robot_name}: linear {v:.2f} m/s, angular {w:.2f} rad/s"
-        return {
-            "type": "command.result",
-            "command": "teleop",
-            "ref": content.get("ref"),
-            "ok": True,
-            "detail": detail,
-        }
+        await self.send_json({**reply, "ok": True, "detail": detail})
 
     def remember_grant(self, reply) -> None:
         """After a teleop went the full way and was allowed, keep its grant for the repeats."""
