@@ -64,7 +64,11 @@ class Planner:
         avoid: discs (x, y, radius) the map does not show, e.g. other robots a local costmap would see.
         """
         s, g = self.to_cell(*start), self.to_cell(*goal)
-        blocked = self.cells_near(avoid) - {s}
+        # A robot pressed against another stands inside that one's inflated disc: let it back out.
+        escape = math.ceil((self.radius + AVOID_MARGIN) / self.cell)
+        blocked = frozenset(
+            c for c in self.cells_near(avoid) if max(abs(c[0] - s[0]), abs(c[1] - s[1])) > escape
+        )
         if not self.free(*g, blocked):
             return None
         cells = self._astar(s, g, blocked)

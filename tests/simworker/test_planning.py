@@ -29,3 +29,11 @@ def test_plan_is_straight_on_a_free_map_and_bends_around_a_robot_it_is_told_of()
 def test_a_goal_inside_another_robot_is_unreachable():
     planner = Planner(load_world("paper").map, 0.105)
     assert planner.plan(B, SPOT_I, avoid=[(*SPOT_I, 0.3)]) is None
+
+
+def test_a_robot_pressed_against_another_can_back_out_and_go_around():
+    planner = Planner(load_world("paper").map, 0.105)
+    pressed = (-1.3, 1.3)  # touching the robot parked at I
+    around = planner.plan(pressed, C, avoid=[(*SPOT_I, 0.3)])
+    assert around is not None and around[-1] == C
+    assert clearance(around[1:], around[0], SPOT_I) > 0.3 + 0.105
