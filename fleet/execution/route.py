@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 
 from django.conf import settings
 
@@ -19,6 +20,7 @@ from fleet.planning import Planner
 log = logging.getLogger(__name__)
 
 DEFAULT_RADIUS = 0.15  # m, when a robot has no footprint
+NEARBY_M = 6.0  # robots farther than this from the start will have moved by the time we get there
 
 
 def footprint_radius(footprint) -> float:
@@ -49,13 +51,30 @@ def _planner(map_id: int, version: str, radius: float) -> Planner:
     return Planner(grid, radius)
 
 
+def robots_in_the_way(robot, start: tuple[float, float]) -> list[tuple[float, float, float]]:
+    """Other robots near the start as discs (x, y, radius), from the poses the links process last pushed."""
+    from django.core.cache import cache
+
+    from fleet import live
+    from robots.models import Robot
+
+    others = {r.pk: r for r in Robot.objects.exclude(pk=robot.pk).only("pk", "footprint")}
+    poses = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in others])
+    return [
+        (pose["x"], pose["y"], footprint_radius(others[pose["id"]].footprint))
+        for pose in poses.values()
+        if pose.get("id") in others and math.dist(start, (pose["x"], pose["y"])) < NEARBY_M
+    ]
+
+
 def route(robot, start: tuple[float, float], goal: tuple[float, float]) -> list[tuple[float, float]]:
-    """Waypoints from start to goal around what the map shows; just [goal] without a map or a path."""
+    """Waypoints from start to goal around what the map shows and the robots parked near; [goal] without a map."""
     row = fleet_map()
     if row is None:
         return [goal]
     planner = _planner(row.pk, row.created_at.isoformat(), round(footprint_radius(robot.footprint), 2))
-    path = planner.plan(start, goal)
+    others = robots_in_the_way(robot, start)
+    path = (planner.plan(start, goal, avoid=others) if others else None) or planner.plan(start, goal)
     if path is None:
         log.warning(
             "%s: no free path on map %s from %s to %s; driving straight", robot.name, row.name, start, goal

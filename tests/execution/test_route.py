@@ -55,3 +55,32 @@ def test_turtlebot_reaches_a_goal_behind_the_crate(turtle_world, fleet_admin):
     assert wait_final(instruction, timeout=75).status == "succeeded"
     x, y, _ = turtle_world.pose("turtlebot")
     assert math.dist((x, y), BEHIND_CRATE) < 0.15
+
+
+@pytest.mark.django_db
+def test_route_goes_around_a_robot_parked_on_the_way():
+    from django.core.cache import cache
+
+    from fleet import live
+
+    load_world_into_db("paper")
+    square = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
+    robot = Robot.objects.create(name="tb", endpoint="ws://x/1", footprint=square)
+    parked = Robot.objects.create(
+        name="parked", endpoint="ws://x/2", footprint=[[-0.3, -0.3], [-0.3, 0.3], [0.3, 0.3], [0.3, -0.3]]
+    )
+    b, c, i = (-2.0, 2.0), (2.0, -2.0), (-1.0, 1.0)  # I lies on the straight line from B to C
+    assert route(robot, b, c) == [c]
+    cache.set(
+        live.POSE_CACHE_KEY.format(id=parked.pk), {"id": parked.pk, "x": i[0], "y": i[1], "yaw": 0.0}, 30
+    )
+    try:
+        around = route(robot, b, c)
+    finally:
+        cache.delete(live.POSE_CACHE_KEY.format(id=parked.pk))
+    assert around[-1] == c and len(around) >= 2
+    legs = zip([b, *around], around, strict=False)
+    samples = [
+        (a[0] + (e[0] - a[0]) * t / 50, a[1] + (e[1] - a[1]) * t / 50) for a, e in legs for t in range(51)
+    ]
+    assert min(math.dist(i, p) for p in samples) > 0.3 + 0.1  # clear of the parked robot's body
