@@ -379,14 +379,15 @@ def latency_why(portal: dict, per_call_ms: float | None) -> str:
         return ""
     cost = f"{per_call_ms:.1f} ms" if per_call_ms is not None else "several ms"
     return (
-        f"command p99 {one} ms with 1 robot, {hundred} ms with 100 moving. Each WebSocket teleop runs "
-        f"fleet.control.teleop through channels' database_sync_to_async, which is thread-sensitive: every "
-        f"command of the process runs one after another on one thread, and each costs about {cost} (robot "
-        "lookup, permission and lease check, the running-execution query, the binding query, an audit row "
-        "written to SQLite, then the publish; profile below). 100 robots held at 5 Hz are 500 commands/s, "
-        "about the capacity of that one thread, so commands queue. Fixes belong to fleet/control.py and "
-        "fleet/consumers.py: cache the robot and its move binding per connection, write the teleop audit in "
-        "batches (or only on start/stop transitions), and publish without the database on the hot path."
+        f"command p99 {one} ms with 1 robot, {hundred} ms with 100 moving. A teleop's first command per robot "
+        f"goes the full way (robot lookup, role and lease check, the running-execution query, the binding "
+        f"query, about {cost} per call, profile below); the repeats of a held button then reuse that grant for "
+        "1 s and publish without the database, side by side for different robots. What remains is the "
+        "portal's per-message work in one ASGI process (JSON decode, channels dispatch, a thread hop to the "
+        "rosbridge link, the reply) on a 2-core machine that also runs the 200-robot simulator and the bench: "
+        "100 robots held at 5 Hz through one WebSocket are 500 commands/s into one process. Several ASGI "
+        "processes (README, Running at scale) or one socket per operator spread that load; a binary or "
+        "batched teleop message would cut the per-message cost."
     )
 
 
