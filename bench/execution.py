@@ -327,23 +327,10 @@ async def stop_queued(bench) -> dict:
 
 def profile_stop(names: list[str], user) -> tuple[float, str]:
     """cProfile fleet.control.stop (what the WebSocket stop runs) on idle robots, in this process."""
-    import cProfile
-    import io
-    import pstats
-
+    from bench.stats import profile_calls
     from fleet.control import stop
 
-    stop(names, user, "bench")  # the rosbridge links open once, as in a running portal
-    prof = cProfile.Profile()
-    t0 = time.perf_counter()
-    prof.enable()
-    for _ in range(5):
-        stop(names, user, "bench")
-    prof.disable()
-    per_call = (time.perf_counter() - t0) * 1000 / 5
-    text = io.StringIO()
-    pstats.Stats(prof, stream=text).sort_stats("cumulative").print_stats(20)
-    body = "\n".join(line for line in text.getvalue().splitlines() if line.strip())
+    per_call, body = profile_calls(lambda: stop(names, user, "bench"), 5)
     return (
         per_call,
         f"fleet.control.stop of {len(names)} idle robots, 5 calls: {per_call:.1f} ms per call\n{body}",

@@ -349,23 +349,10 @@ class Bench:
 
 def profile_teleop(name: str, user, calls: int = 200) -> tuple[float, str]:
     """cProfile what the portal runs per WebSocket teleop (fleet.control.teleop), in this process."""
-    import cProfile
-    import io
-    import pstats
-
+    from bench.stats import profile_calls
     from fleet.control import teleop
 
-    teleop(name, user, 0.0, 0.0)  # the rosbridge link is opened once, as in a running portal
-    prof = cProfile.Profile()
-    t0 = time.perf_counter()
-    prof.enable()
-    for _ in range(calls):
-        teleop(name, user, 0.0, 0.0)
-    prof.disable()
-    per_call = (time.perf_counter() - t0) * 1000 / calls
-    text = io.StringIO()
-    pstats.Stats(prof, stream=text).sort_stats("cumulative").print_stats(20)
-    body = "\n".join(line for line in text.getvalue().splitlines() if line.strip())
+    per_call, body = profile_calls(lambda: teleop(name, user, 0.0, 0.0), calls)
     return (
         per_call,
         f"fleet.control.teleop, {calls} calls: {per_call:.2f} ms per call (under cProfile)\n{body}",

@@ -29,3 +29,23 @@ def p50_p99(samples: list[float], digits: int = 3) -> dict:
     """Just the median and the 99th percentile, as summary.json wants them."""
     s = summarize(samples, digits)
     return {"p50": s["p50"], "p99": s["p99"]}
+
+
+def profile_calls(call, calls: int) -> tuple[float, str]:
+    """Run call() once to warm it up, then `calls` times under cProfile: (ms per call, the top 20 by cumulative)."""
+    import cProfile
+    import io
+    import pstats
+    import time
+
+    call()  # links open once, as in a running portal
+    prof = cProfile.Profile()
+    t0 = time.perf_counter()
+    prof.enable()
+    for _ in range(calls):
+        call()
+    prof.disable()
+    per_call = (time.perf_counter() - t0) * 1000 / calls
+    text = io.StringIO()
+    pstats.Stats(prof, stream=text).sort_stats("cumulative").print_stats(20)
+    return per_call, "\n".join(line for line in text.getvalue().splitlines() if line.strip())
