@@ -14,6 +14,7 @@ XY_TOLERANCE = 0.15
 YAW_TOLERANCE = 0.1
 STUCK_SECONDS = 10.0
 MAX_REPLANS = 2  # replans around other robots before a stuck goal is aborted
+BACKUP_SECONDS, BACKUP_SPEED = 1.5, -0.1  # the recovery before a replan: back away at 0.1 m/s
 LOCAL_COSTMAP_M = 3.0  # robots closer than this are seen (the local costmap's size)
 ACTIVE, PREEMPTED, SUCCEEDED, ABORTED = 1, 2, 3, 4  # actionlib_msgs/GoalStatus
 
@@ -33,6 +34,7 @@ class Navigator:
         self.on_done: Callable[[int, str], None] | None = None
         self.progress = (math.inf, 0.0)
         self.replans = 0
+        self.backing_until = -1.0
 
     @property
     def active(self) -> bool:
@@ -71,6 +73,9 @@ class Navigator:
         """Compute and send one velocity command (called at the controller frequency)."""
         if self.goal is None:
             return
+        if self.robot.physics.time < self.backing_until:  # recovery: back away from what blocks us
+            self.robot.drive(BACKUP_SPEED, 0.0)
+            return
         x, y, yaw = self.robot.pose()
         p = self.robot.profile
         while len(self.path) > 1 and math.dist((x, y), self.path[0]) < 0.25:
@@ -105,7 +110,10 @@ class Navigator:
         elif now - since > STUCK_SECONDS:
             if self.replans < MAX_REPLANS and self._replan_around_robots():
                 self.replans += 1
-                self.progress = (math.inf, now)
+                self.progress = (math.inf, now + BACKUP_SECONDS)
+                self.backing_until = (
+                    now + BACKUP_SECONDS
+                )  # move_base's recovery: back up, then follow the new plan
                 return
             self.stop(ABORTED, "Robot is stuck: no progress")
 
