@@ -131,6 +131,14 @@ class Portal:
         self._check_alive("worker")
         self._check_alive("control")
 
+    def start_links(self) -> None:
+        """The robot links as `make run` has them: one rosbridge link per registered endpoint, live poses."""
+        if "links" in self.procs:
+            return
+        self._spawn("links", [sys.executable, "manage.py", "robotlinks"])
+        time.sleep(1.0)
+        self._check_alive("links")
+
     def _spawn(self, name: str, cmd: list[str]) -> None:
         log = open(self.tmp / f"{name}.log", "wb")  # noqa: SIM115 - lives as long as the process
         self.procs[name] = subprocess.Popen(

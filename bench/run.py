@@ -339,6 +339,7 @@ class Bench:
             await asyncio.to_thread(hand_register, links)
         self.portal.start_web()
         self.portal.start_worker()
+        self.portal.start_links()  # live poses: the engine routes around robots parked on the way
         limit = self.cfg["exec_limit_s"]
         try:
             return await asyncio.wait_for(execution.run(self, name), limit)

@@ -107,19 +107,37 @@ def _stamp(execution: Execution, field_name: str) -> None:
     )
 
 
-def drive(session: Session, controller, limit_s: float) -> None:
-    """Run a velocity controller tick by tick on odometry until it is done."""
+class Blocked(StepFailed):
+    """The robot is commanded to move but does not: something the plan did not know stands in the way."""
+
+
+def drive(session: Session, controller, limit_s: float, blocked_s: float | None = None) -> None:
+    """Run a velocity controller tick by tick on odometry until it is done.
+
+    blocked_s: raise Blocked when the robot has not moved (2 cm, 3 degrees) for that long while commanded.
+    """
     deadline = time.monotonic() + limit_s
+    still_since, still_pose = time.monotonic(), None
     while True:
         pose = session.pose()
         command = controller.command(pose)
         if command.done:
             session.link.halt()
             return
-        if time.monotonic() > deadline:
+        now = time.monotonic()
+        if now > deadline:
             session.link.halt()
             raise StepFailed(f"{session.robot.name}: did not finish within {limit_s:.0f} s")
+        if still_pose is None or _moved(still_pose, pose):
+            still_since, still_pose = now, pose
+        elif blocked_s is not None and now - still_since > blocked_s:
+            session.link.halt()
+            raise Blocked(f"{session.robot.name}: blocked near ({pose[0]:.1f}, {pose[1]:.1f})")
         session.send(command.v, command.w)
+
+
+def _moved(before, after) -> bool:
+    return math.dist(before[:2], after[:2]) > 0.02 or abs(motion.wrap(after[2] - before[2])) > 0.05
 
 
 def navigate(session: Session, x: float, y: float, limit_s: float) -> None:
@@ -150,6 +168,8 @@ def travel_time(distance: float, turn: float, limits: motion.Limits, factor: flo
 
 
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
+BLOCKED_S = 2.0  # s commanded without moving: something unplanned is in the way
+REROUTES, BACK_OFF_S = 2, 1.0
 
 
 def go_to(session: Session, destination: dict, factor: float) -> None:
@@ -165,20 +185,41 @@ def go_to(session: Session, destination: dict, factor: float) -> None:
             nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
             navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
         else:
-            drive_route(session, route(session.robot, pose[:2], (x, y)), limits, factor)
+            drive_route(session, (x, y), limits, factor)
     finally:
         live.goal(session.robot, None, None, None)
 
 
-def drive_route(session: Session, waypoints: list, limits: motion.Limits, factor: float) -> None:
-    """Drive leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal."""
-    for index, (x, y) in enumerate(waypoints):
+def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> None:
+    """Drive a route leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal.
+
+    Blocked on the way (a robot that parked there after the plan was made), the robot backs off a little and
+    plans again from where it is, with the other robots' live poses, up to REROUTES times.
+    """
+    for attempt in range(REROUTES + 1):
         pose = session.pose()
-        last = index == len(waypoints) - 1
-        tolerance = motion.TOLERANCE if last else WAYPOINT_TOLERANCE
-        controller = motion.GoToGoal((x, y), limits, factor, tolerance)
-        distance = math.hypot(x - pose[0], y - pose[1])
-        drive(session, controller, travel_time(distance, math.pi, limits, factor))
+        try:
+            for x, y in route(session.robot, pose[:2], goal):
+                pose = session.pose()
+                last_leg = (x, y) == goal
+                tolerance = motion.TOLERANCE if last_leg else WAYPOINT_TOLERANCE
+                controller = motion.GoToGoal((x, y), limits, factor, tolerance)
+                limit = travel_time(math.hypot(x - pose[0], y - pose[1]), math.pi, limits, factor)
+                drive(session, controller, limit, blocked_s=BLOCKED_S)
+            return
+        except Blocked:
+            if attempt == REROUTES:
+                raise
+            back_off(session, limits)
+
+
+def back_off(session: Session, limits: motion.Limits) -> None:
+    """Reverse slowly for a moment, to leave room to turn."""
+    until = time.monotonic() + BACK_OFF_S
+    while time.monotonic() < until:
+        session.send(-0.25 * limits.linear, 0.0)
+        session.pose()
+    session.link.halt()
 
 
 def do_task(session: Session, task: str, factor: float, where: str) -> None:
