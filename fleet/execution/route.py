@@ -34,6 +34,17 @@ def footprint_radius(footprint) -> float:
     return min(max(xs) - min(xs), max(ys) - min(ys)) / 2
 
 
+def reach_radius(footprint) -> float:
+    """Half the footprint's diagonal: the disc another robot's corners may sweep (a Husky is 1 m long)."""
+    try:
+        xs, ys = [float(p[0]) for p in footprint], [float(p[1]) for p in footprint]
+    except (TypeError, ValueError, IndexError):
+        return DEFAULT_RADIUS
+    if len(xs) < 3:
+        return DEFAULT_RADIUS
+    return math.hypot(max(xs) - min(xs), max(ys) - min(ys)) / 2
+
+
 def fleet_map() -> Map | None:
     """The map robots move on: the current world's, else the newest one."""
     return (
@@ -61,7 +72,7 @@ def robots_in_the_way(robot, start: tuple[float, float]) -> list[tuple[float, fl
     others = {r.pk: r for r in Robot.objects.exclude(pk=robot.pk).only("pk", "footprint")}
     poses = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in others])
     return [
-        (pose["x"], pose["y"], footprint_radius(others[pose["id"]].footprint))
+        (pose["x"], pose["y"], reach_radius(others[pose["id"]].footprint))
         for pose in poses.values()
         if pose.get("id") in others and math.dist(start, (pose["x"], pose["y"])) < NEARBY_M
     ]
