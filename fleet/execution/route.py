@@ -23,26 +23,27 @@ DEFAULT_RADIUS = 0.15  # m, when a robot has no footprint
 NEARBY_M = 6.0  # robots farther than this from the start will have moved by the time we get there
 
 
-def footprint_radius(footprint) -> float:
-    """Half the smaller extent of the footprint polygon: the radius the robot needs to pass a gap."""
+def extents(footprint) -> tuple[float, float] | None:
+    """(x extent, y extent) of a footprint polygon [[x, y], ...]; None for no usable polygon."""
     try:
         xs, ys = [float(p[0]) for p in footprint], [float(p[1]) for p in footprint]
     except (TypeError, ValueError, IndexError):
-        return DEFAULT_RADIUS
+        return None
     if len(xs) < 3:
-        return DEFAULT_RADIUS
-    return min(max(xs) - min(xs), max(ys) - min(ys)) / 2
+        return None
+    return max(xs) - min(xs), max(ys) - min(ys)
+
+
+def footprint_radius(footprint) -> float:
+    """Half the smaller extent of the footprint polygon: the radius the robot needs to pass a gap."""
+    size = extents(footprint)
+    return min(size) / 2 if size else DEFAULT_RADIUS
 
 
 def reach_radius(footprint) -> float:
     """Half the footprint's diagonal: the disc another robot's corners may sweep (a Husky is 1 m long)."""
-    try:
-        xs, ys = [float(p[0]) for p in footprint], [float(p[1]) for p in footprint]
-    except (TypeError, ValueError, IndexError):
-        return DEFAULT_RADIUS
-    if len(xs) < 3:
-        return DEFAULT_RADIUS
-    return math.hypot(max(xs) - min(xs), max(ys) - min(ys)) / 2
+    size = extents(footprint)
+    return math.hypot(*size) / 2 if size else DEFAULT_RADIUS
 
 
 def fleet_map() -> Map | None:
