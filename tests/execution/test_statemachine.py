@@ -84,3 +84,11 @@ def test_admission_preempts_only_lower_priority(state, priority, expected):
 def test_next_leg_and_next_task_are_self_transitions():
     assert next_state(State.MOTION, Event.MOVE) == State.MOTION
     assert next_state(State.WORK, Event.WORK) == State.WORK
+
+
+def test_the_plain_states_are_the_models_states():
+    """fleet.statemachine needs no Django, so it spells the states again; they must not drift apart."""
+    from fleet.statemachine import State
+    from robots.models import Robot
+
+    assert [s.value for s in State] == list(Robot.State.values)
