@@ -5,15 +5,16 @@ Commands from the browser (stop, teleop) are checked here against the user's rol
 exactly as the pages' POST views check them (both call ``run_command``).
 """
 
-import asyncio
 import logging
 import math
-from typing import NamedTuple
 
+from channels.consumer import get_handler_name
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncJsonWebsocketConsumer
 
-from fleet import live
+from fleet import fast_stop, live
+from fleet.held_teleop import HeldTeleop
+from fleet.roles import can_control
 
 VIEW_PERM = "robots.view_robot"
 log = logging.getLogger(__name__)
@@ -21,13 +22,6 @@ log = logging.getLogger(__name__)
 
 class CommandError(Exception):
     """A command that is refused or malformed; the message says why, in words."""
-
-
-class CommandDone(NamedTuple):
-    """A command's words for the person, and the teleop grant its repeats may reuse."""
-
-    detail: str
-    grant: object
 
 
 def _int_list(ids) -> list[int]:
@@ -75,38 +69,55 @@ def command_stop(user, content: dict) -> str:
     return f"Stopped {stopped}." + "".join(f" {reason}" for reason in unreached)
 
 
+def teleop_checks(user, content: dict):
+    """The checks of a teleop command (role, lease, running instruction, move topic): its grant, or why not."""
+    robot_id = content.get("robot")
+    if not isinstance(robot_id, int) or isinstance(robot_id, bool):
+        raise CommandError("robot: no such robot")
+    grant = _control().teleop_grants([robot_id], user)[robot_id]
+    if isinstance(grant, Exception):
+        log.warning("teleop refused: %s", grant)
+        raise _refusal(grant)
+    return grant
+
+
+def _refusal(exc: Exception) -> CommandError:
+    """A refusal of control.teleop_grants in the person's words."""
+    return CommandError("robot: no such robot" if isinstance(exc, ValueError) else str(exc))
+
+
 def command_teleop(user, content: dict) -> str:
     """Drive one robot at (linear, angular), clamped to its limits, if the user may command it."""
-    from fleet.leases import ControlRefused, check_command
-    from robots.models import Robot
+    linear, angular = _number(content, "linear"), _number(content, "angular")
+    grant = teleop_checks(user, content)
+    v, w = _call(_control().teleop_with, grant, user, linear, angular)
+    return f"{grant.robot_name}: linear {v:.2f} m/s, angular {w:.2f} rad/s"
 
-    robot = (
-        Robot.objects.filter(pk=content.get("robot")).first()
-        if isinstance(content.get("robot"), int)
-        else None
-    )
-    if robot is None:
-        raise CommandError("robot: no such robot")
-    linear = max(-robot.max_linear, min(robot.max_linear, _number(content, "linear")))
-    angular = max(-robot.max_angular, min(robot.max_angular, _number(content, "angular")))
-    try:
-        check_command(user, robot)
-    except ControlRefused as exc:
-        raise CommandError(str(exc)) from exc
-    control = _control()
-    grant = _call(control.teleop_grant, robot, user)
-    _call(control.teleop_with, grant, user, linear, angular)
-    return CommandDone(f"{robot.name}: linear {linear:.2f} m/s, angular {angular:.2f} rad/s", grant)
+
+def checked_teleops(user, robot_ids) -> dict:
+    """The checks of several presses at once, for a socket's held buttons: {robot id: grant, or why not}.
+
+    Refusals are audited as run_command audits them.
+    """
+    grants = _control().teleop_grants(robot_ids, user)
+    for robot_id, grant in grants.items():
+        if isinstance(grant, Exception):
+            grants[robot_id] = _refusal(grant)
+            refused(user, "teleop", grants[robot_id])
+    return grants
 
 
 COMMANDS = {"stop": command_stop, "teleop": command_teleop}
 
 
-def run_command(user, content, with_grant: bool = False) -> dict:
-    """Run one browser command; the reply says whether it was done and why not.
+def refused(user, name, exc: CommandError) -> None:
+    from fleet import audit
 
-    with_grant: a teleop's reply carries its grant under "grant" (the socket keeps it; never sent on).
-    """
+    audit.record(user, "command.refused", name, reason=str(exc))
+
+
+def run_command(user, content) -> dict:
+    """Run one browser command; the reply says whether it was done and why not."""
     name = content.get("command") if isinstance(content, dict) else None
     handler = COMMANDS.get(name)
     reply = {"type": "command.result", "command": name, "ref": content.get("ref") if name else None}
@@ -115,13 +126,8 @@ def run_command(user, content, with_grant: bool = False) -> dict:
     try:
         detail = handler(user, content)
     except CommandError as exc:
-        from fleet import audit
-
-        audit.record(user, "command.refused", name, reason=str(exc))
+        refused(user, name, exc)
         return {**reply, "ok": False, "detail": str(exc)}
-    if isinstance(detail, CommandDone):
-        grant = {"grant": detail.grant} if with_grant else {}
-        return {**reply, "ok": True, "detail": detail.detail, **grant}
     return {**reply, "ok": True, "detail": detail}
 
 
@@ -141,14 +147,26 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         if snapshot is None:
             await self.close(code=4404)
             return
+        self.may_control = await database_sync_to_async(can_control)(user)
+        if self.may_control:
+            fast_stop.TARGETS.refresh()  # what a stop from this page needs, loaded before it is pressed
         self.joined = self.group_names()
         for group in self.joined:
             await self.channel_layer.group_add(group, self.channel_name)
         await self.send_json(snapshot)
 
+    async def dispatch(self, message):
+        """Channels' dispatch without its per-message close_old_connections, a hop to the one shared sync
+        thread for every frame and push. This consumer reaches the database only through
+        database_sync_to_async, whose thread closes old connections around each call itself."""
+        handler = getattr(self, get_handler_name(message), None)
+        if handler is None:
+            raise ValueError(f"No handler for message type {message['type']}")
+        await handler(message)
+
     async def disconnect(self, code):
-        for task in getattr(self, "chains", {}).values():
-            task.cancel()  # a held button's last repeats: the socket that wanted them is gone
+        if getattr(self, "teleop", None) is not None:
+            self.teleop.close()
         for group in getattr(self, "joined", ()):
             await self.channel_layer.group_discard(group, self.channel_name)
 
@@ -156,62 +174,50 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         user = self.scope["user"]
         if not user.is_authenticated:
             return
-        if self.held_teleop_in_order(user, content):
+        if isinstance(content, dict) and content.get("command") == "teleop":
+            await self.take_teleop(user, content)
             return
+        if (
+            isinstance(content, dict)
+            and content.get("command") == "stop"
+            and getattr(self, "may_control", False)
+        ):
+            ids = content.get("robots", "all")
+            if ids == "all" or (isinstance(ids, list) and all(isinstance(pk, int) for pk in ids)):
+                await fast_stop.stop_now(ids)  # a head start; run_command below checks, stops again, answers
         # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
-        command = database_sync_to_async(run_command, thread_sensitive=False)
-        reply = await command(user, content, with_grant=True)
-        self.remember_grant(reply)
+        reply = await database_sync_to_async(run_command, thread_sensitive=False)(user, content)
         await self.send_json(reply)
 
-    def held_teleop_in_order(self, user, content) -> bool:
-        """Take a held button's repeat under this socket's fresh grant, without the database.
-
-        Robots are driven side by side (a message for one robot does not wait for another's publish), and
-        each robot's commands still go out in the order they came. False: the command goes the full way.
-        """
-        if not (isinstance(content, dict) and content.get("command") == "teleop"):
-            return False
-        grant = getattr(self, "grants", {}).get(content.get("robot"))
-        if grant is None or not grant.valid:
-            return False
+    async def take_teleop(self, user, content) -> None:
+        """Held buttons: checked once per press, repeats published from this loop (fleet.held_teleop)."""
         try:
             linear, angular = _number(content, "linear"), _number(content, "angular")
-        except CommandError:
-            return False
-        chains = self.__dict__.setdefault("chains", {})
-        previous = chains.get(grant.robot_id)
-        chains[grant.robot_id] = asyncio.ensure_future(
-            self.held_teleop(previous, grant, user, linear, angular, content.get("ref"))
-        )
-        return True
-
-    async def held_teleop(self, previous, grant, user, linear, angular, ref) -> None:
-        if previous is not None:
-            await asyncio.gather(previous, return_exceptions=True)
-        reply = {"type": "command.result", "command": "teleop", "ref": ref}
-        try:
-            teleop_with = database_sync_to_async(_control().teleop_with, thread_sensitive=False)
-            v, w = await teleop_with(grant, user, linear, angular)
-        except Exception as exc:  # the link went down under the grant: said in words, grant dropped
-            self.grants.pop(grant.robot_id, None)
-            await self.send_json({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
+        except CommandError as exc:
+            reply = {"type": "command.result", "command": "teleop", "ref": content.get("ref")}
+            await self.send_json({**reply, "ok": False, "detail": str(exc)})
             return
-        detail = f"{grant.robot_name}: linear {v:.2f} m/s, angular {w:.2f} rad/s"
-        await self.send_json({**reply, "ok": True, "detail": detail})
+        if getattr(self, "teleop", None) is None:
+            self.teleop = HeldTeleop(user, self.send_json, checked_teleops, _control())
+        self.teleop.take(content, linear, angular)
 
-    def remember_grant(self, reply) -> None:
-        """After a teleop went the full way and was allowed, keep its grant for the repeats."""
-        grant = reply.pop("grant", None)
-        if grant is not None:
-            self.grants = {**getattr(self, "grants", {}), grant.robot_id: grant}
+    async def changed(self, event):
+        """A robot's lease or state changed: forward it, and re-check its teleop before the next repeat."""
+        if getattr(self, "teleop", None) is not None:
+            self.teleop.drop(event.get("id"))
+        await self.send_json(event)
 
     async def forward(self, event):
         await self.send_json(event)
 
     # One handler per payload type of fleet.live; the name matches the message "type".
-    robot_status = robot_transition = instruction_update = lease_update = robot_goal = forward
-    registration_progress = forward
+    robot_status = instruction_update = robot_goal = forward
+    robot_transition = lease_update = changed
+
+    async def registration_progress(self, event):
+        if event.get("ok") and getattr(self, "may_control", False):
+            fast_stop.TARGETS.refresh(now=True)  # new robots: a stop from this page reaches them at once
+        await self.send_json(event)
 
 
 class FleetConsumer(_PageConsumer):

@@ -15,11 +15,11 @@ from dataclasses import dataclass
 from django.core.cache import cache
 from django.utils import timezone
 
-from fleet import audit, motion
+from fleet import audit, leases, motion
 from fleet.execution import coordination
 from fleet.execution.link import LinkError, publish_zero
 from fleet.execution.runner import settle
-from fleet.leases import ControlRefused, check_command, check_stop
+from fleet.leases import ControlRefused, check_stop
 from fleet.models import Execution
 from robots.models import Robot
 
@@ -84,9 +84,9 @@ HELD_REPEAT_S = 2  # a held button repeats every 0.2 s; a longer gap is a new pr
 class TeleopGrant:
     """What the checks of one teleop command established: where to publish, within which limits, until when.
 
-    A held button sends a command every 0.2 s; within GRANT_S the repeats reuse the grant and touch no
-    database (the portal's WebSocket keeps one per robot), so a lease taken by someone else or an instruction
-    that starts driving the robot takes effect within GRANT_S.
+    A held button sends a command every 0.2 s. The portal's WebSocket keeps one grant per robot and publishes
+    the repeats under it without the database; it drops the grant when the robot's lease or state changes
+    (pushed to every page) and re-checks all its grants at once every GRANT_S while they are used.
     """
 
     robot_id: int
@@ -103,38 +103,97 @@ class TeleopGrant:
     def valid(self) -> bool:
         return time.monotonic() < self.expires
 
+    def clamp(self, linear: float, angular: float) -> tuple[float, float]:
+        return motion.clamp(float(linear), self.max_linear), motion.clamp(float(angular), self.max_angular)
+
+    def message(self, v: float, w: float) -> dict:
+        return motion.velocity_message(v, w, self.message_type, self.ros_version)
+
 
 GRANT_S = 1.0
+
+
+def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
+    """Check at once that the user may drive each robot now: {robot id: its grant, or the refusal}.
+
+    Four queries whatever the number of robots, so a socket holding many buttons re-checks them cheaply.
+    Refusals: ControlRefused (role, someone else's lease, a running instruction), LinkError (no move topic),
+    ValueError (no such robot).
+    """
+    from robots.models import Binding
+
+    ids = list(dict.fromkeys(robot_ids))
+    robots = {robot.pk: robot for robot in Robot.objects.filter(pk__in=ids)}
+    found = list(robots)
+    held = {lease.robot_id: lease.user for lease in leases.active(found)}
+    busy = dict(
+        Execution.objects.filter(robot__in=found, status=Execution.Status.RUNNING).values_list(
+            "robot_id", "instruction_id"
+        )
+    )
+    moves = {}
+    for binding in Binding.objects.filter(robot__in=found, action="move").exclude(target="").order_by("-pk"):
+        moves[binding.robot_id] = binding
+    expires = time.monotonic() + GRANT_S
+    out: dict[int, TeleopGrant | Exception] = {}
+    for pk in ids:
+        robot = robots.get(pk)
+        if robot is None:
+            out[pk] = ValueError(f"robot {pk}: no such robot")
+            continue
+        try:
+            leases.check_command(user, robot, held_by=held.get(pk))
+        except ControlRefused as exc:
+            out[pk] = exc
+            continue
+        if pk in busy:
+            out[pk] = ControlRefused(f"{robot.name} is running instruction #{busy[pk]}; stop it first.")
+        elif (move := moves.get(pk)) is None:
+            out[pk] = LinkError(f"{robot.name}: no move topic is bound")
+        else:
+            out[pk] = TeleopGrant(
+                robot.pk, robot.name, robot.endpoint, move.target, move.message_type or "geometry_msgs/Twist",
+                robot.ros_version, robot.max_linear, robot.max_angular, expires,
+            )  # fmt: skip
+    return out
 
 
 def teleop_grant(robot, user) -> TeleopGrant:
     """Check that the user may drive the robot now and find its move topic (ControlRefused / LinkError)."""
     robot = _robots([robot])[0]
-    check_command(user, robot)
-    busy = Execution.objects.filter(robot=robot, status=Execution.Status.RUNNING).first()
-    if busy is not None:
-        raise ControlRefused(f"{robot.name} is running instruction #{busy.instruction_id}; stop it first.")
-    move = robot.bindings.filter(action="move").exclude(target="").first()
-    if move is None:
-        raise LinkError(f"{robot.name}: no move topic is bound")
-    return TeleopGrant(
-        robot.pk, robot.name, robot.endpoint, move.target, move.message_type or "geometry_msgs/Twist",
-        robot.ros_version, robot.max_linear, robot.max_angular, time.monotonic() + GRANT_S,
-    )  # fmt: skip
+    grant = teleop_grants([robot.pk], user)[robot.pk]
+    if isinstance(grant, Exception):
+        raise grant
+    return grant
 
 
 def teleop_with(grant: TeleopGrant, user, linear: float, angular: float) -> tuple[float, float]:
     """Publish one velocity command under a grant, within the robot's limits; return what was sent."""
     from robots.rosbridge.sync import get_client
 
-    v, w = motion.clamp(float(linear), grant.max_linear), motion.clamp(float(angular), grant.max_angular)
-    message = motion.velocity_message(v, w, grant.message_type, grant.ros_version)
+    v, w = grant.clamp(linear, angular)
     try:
         client = get_client(grant.endpoint)
     except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the person
         raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
-    client.publish(grant.target, message, grant.message_type)
+    client.publish(grant.target, grant.message(v, w), grant.message_type)
     _audit_teleop(user, grant, v, w)
+    return v, w
+
+
+async def publish_teleop(grant: TeleopGrant, linear: float, angular: float) -> tuple[float, float]:
+    """teleop_with for code on an event loop: one send on the loop's own link, no thread, no database.
+
+    The caller audits changes (audit_teleops, from a thread); a held button's repeats need no audit.
+    """
+    from robots.rosbridge import pool
+
+    v, w = grant.clamp(linear, angular)
+    try:
+        client = await pool.client(grant.endpoint)
+        await client.publish(grant.target, grant.message(v, w), grant.message_type)
+    except Exception as exc:  # the link is down or went down: a one-line reason for the person
+        raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
     return v, w
 
 
@@ -144,6 +203,11 @@ def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
     Refused (ControlRefused) while an instruction drives the robot: stop it first.
     """
     return teleop_with(teleop_grant(robot, user), user, linear, angular)
+
+
+def audit_teleops(user, changes) -> None:
+    """Audit a socket's changes of teleop commands in one write: (robot name, at, v, w) each."""
+    audit.record_many(user, "teleop", [(name, at, {"linear": v, "angular": w}) for name, at, v, w in changes])
 
 
 def _audit_teleop(user, grant: TeleopGrant, v: float, w: float) -> None:

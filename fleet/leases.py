@@ -9,7 +9,7 @@ from django.conf import settings
 from django.db import transaction
 from django.utils import timezone
 
-from fleet import audit
+from fleet import audit, live
 from fleet.models import ControlLease
 from fleet.roles import can_control, can_register
 
@@ -18,19 +18,26 @@ class ControlRefused(Exception):
     """The user may not command this robot now; the message says why, in words."""
 
 
+def active(robots):
+    """The leases held now on these robots (a queryset, users joined)."""
+    return ControlLease.objects.filter(robot__in=robots, expires_at__gt=timezone.now()).select_related("user")
+
+
 def holder(robot):
     """The user holding the robot's lease now, or None."""
-    lease = (
-        ControlLease.objects.filter(robot=robot, expires_at__gt=timezone.now()).select_related("user").first()
-    )
+    lease = active([robot]).first()
     return lease.user if lease else None
 
 
-def check_command(user, robot) -> None:
-    """Raise ControlRefused unless the user may command the robot now."""
+_ASK = object()
+
+
+def check_command(user, robot, held_by=_ASK) -> None:
+    """Raise ControlRefused unless the user may command the robot now (held_by: its holder, if known)."""
     if not can_control(user):
         raise ControlRefused(f"{user.username} may only view robots, not command them.")
-    held_by = holder(robot)
+    if held_by is _ASK:
+        held_by = holder(robot)
     if held_by is not None and held_by != user:
         raise ControlRefused(f"{robot.name} is held by {held_by.username}; ask them to release it.")
 
@@ -61,6 +68,7 @@ def take(user, robot, seconds: int | None = None) -> ControlLease:
         robot=robot, defaults={"user": user, "taken_at": now, "expires_at": now + timedelta(seconds=seconds)}
     )
     audit.record(user, "control.take", robot.name, taken_over_from=taken_over, seconds=seconds)
+    live.lease(robot)  # on commit: every page, and every socket's teleop grant for the robot, sees it
     return lease
 
 
@@ -73,4 +81,5 @@ def release(user, robot) -> bool:
         raise ControlRefused(f"{robot.name} is held by {lease.user.username}, not by you.")
     lease.delete()
     audit.record(user, "control.release", robot.name)
+    live.lease(robot)
     return True

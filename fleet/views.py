@@ -274,7 +274,6 @@ def lease(request, pk: int):
             return _answer(request, False, "action: must be take or release", 422)
     except leases.ControlRefused as exc:
         return _answer(request, False, str(exc), 403)
-    live.lease(robot)
     held_by = leases.holder(robot)
     detail = f"{robot.name} is held by {held_by.username}." if held_by else f"{robot.name} is free."
     return _answer(request, True, detail, holder=held_by.username if held_by else None)

@@ -17,6 +17,7 @@ import socket
 import threading
 import time
 import uuid
+import weakref
 
 import redis
 from django.conf import settings
@@ -83,6 +84,27 @@ def request_stop(robot_ids) -> float:
     for robot_id in robot_ids:
         pipe.set(key("stop", robot_id), repr(now), ex=STOP_FLAG_TTL_S)
     pipe.execute()
+    return now
+
+
+_ASYNC: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> redis.asyncio client
+
+
+async def arequest_stop(robot_ids) -> float:
+    """request_stop for code on an event loop: the same flags, over this loop's own Redis connection."""
+    import asyncio
+
+    import redis.asyncio
+
+    loop = asyncio.get_running_loop()
+    client = _ASYNC.get(loop)
+    if client is None:
+        client = _ASYNC[loop] = redis.asyncio.Redis.from_url(settings.REDIS_URL, socket_timeout=5)
+    now = time.time()
+    async with client.pipeline(transaction=False) as pipe:
+        for robot_id in robot_ids:
+            pipe.set(key("stop", robot_id), repr(now), ex=STOP_FLAG_TTL_S)
+        await pipe.execute()
     return now
 
 

@@ -1,5 +1,7 @@
 """The pages' WebSockets: session auth, snapshot first, then deltas; commands refused for viewers and non-holders."""
 
+import asyncio
+
 import pytest
 from asgiref.sync import sync_to_async
 from channels.testing import WebsocketCommunicator
@@ -70,8 +72,7 @@ async def test_snapshot_first_then_deltas(viewer, operator, fleet):
             robot=turtlebot, from_state="ready", to_state="motion", reason="go"
         )
         live.transition(turtlebot, record)
-        leases.take(operator, turtlebot)
-        live.lease(turtlebot)
+        leases.take(operator, turtlebot)  # pushes the lease itself
         live.goal(turtlebot, "A", 0.2, 0.2)
 
     await change()
@@ -159,40 +160,186 @@ async def test_unknown_and_malformed_commands_are_answered_not_crashed(operator,
     await communicator.disconnect()
 
 
-async def test_a_held_teleop_reuses_its_grant_until_it_expires(operator, second_operator, fleet, monkeypatch):
-    """Repeats within the grant publish without the checks; after it, a lease taken meanwhile refuses them."""
-    import asyncio
+@pytest.fixture
+def published(monkeypatch):
+    """What the sockets' teleop publishes on the robots' links: (topic, linear x)."""
+    sent = []
 
-    from fleet import control
+    class FakeLink:
+        async def publish(self, topic, message, type_):
+            sent.append((topic, message["linear"]["x"]))
 
-    published = []
+    async def client(url, connect_timeout=2.0):
+        return FakeLink()
 
-    class FakeClient:
-        def publish(self, topic, message, type_):
-            published.append((topic, message["linear"]["x"]))
+    monkeypatch.setattr("robots.rosbridge.pool.client", client)
+    return sent
 
-    monkeypatch.setattr("robots.rosbridge.sync.get_client", lambda url: FakeClient())
-    monkeypatch.setattr(control, "GRANT_S", 0.5)
+
+async def _teleop(communicator, robot, linear):
+    await communicator.send_json_to({"command": "teleop", "robot": robot.pk, "linear": linear, "angular": 0})
+    while True:
+        reply = await communicator.receive_json_from(timeout=5)
+        if reply.get("type") == "command.result":
+            return reply
+
+
+async def test_a_lease_taken_by_someone_else_stops_a_held_teleop_at_once(
+    operator, second_operator, fleet, published
+):
+    """Repeats publish under the press's grant; the lease push drops it, so the next repeat is refused."""
     turtlebot = fleet["turtlebot"]
     communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
     await communicator.receive_json_from(timeout=5)
-
-    async def teleop(linear):
-        await communicator.send_json_to(
-            {"command": "teleop", "robot": turtlebot.pk, "linear": linear, "angular": 0}
-        )
-        while True:
-            reply = await communicator.receive_json_from(timeout=5)
-            if reply.get("type") == "command.result":
-                return reply
-
-    assert (await teleop(0.1))["ok"] is True
+    assert (await _teleop(communicator, turtlebot, 0.1))["ok"] is True
+    assert (await _teleop(communicator, turtlebot, 5.0))[
+        "detail"
+    ] == "turtlebot: linear 0.22 m/s, angular 0.00 rad/s"
     await sync_to_async(leases.take)(second_operator, turtlebot)
-    assert (await teleop(0.1))["ok"] is True  # a repeat within the grant
-    assert published == [("/cmd_vel", 0.1), ("/cmd_vel", 0.1)]
-    await asyncio.sleep(0.6)
-    refused = await teleop(0.1)
+    while (await communicator.receive_json_from(timeout=5)).get("type") != "lease.update":
+        pass
+    refused = await _teleop(communicator, turtlebot, 0.1)
     assert refused["ok"] is False and "held by olga" in refused["detail"]
-    assert len(published) == 2
-    assert "grant" not in refused
+    assert published == [("/cmd_vel", 0.1), ("/cmd_vel", 0.22)]
+    await communicator.disconnect()
+
+
+async def test_a_held_teleop_is_rechecked_while_held(
+    operator, second_operator, fleet, published, monkeypatch
+):
+    """Without any push (a lost message), the periodic re-check still finds the lease and says so."""
+    from fleet import control
+
+    monkeypatch.setattr(control, "GRANT_S", 0.4)
+    monkeypatch.setattr(live, "lease", lambda robot: None)  # the push is lost
+    turtlebot = fleet["turtlebot"]
+    communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
+    await communicator.receive_json_from(timeout=5)
+    assert (await _teleop(communicator, turtlebot, 0.1))["ok"] is True
+    await sync_to_async(leases.take)(second_operator, turtlebot)
+    assert (await _teleop(communicator, turtlebot, 0.1))["ok"] is True  # the grant still stands
+    said = await communicator.receive_json_from(timeout=5)  # the re-check, 0.2 s later
+    assert said["ok"] is False and said["ref"] is None and "held by olga" in said["detail"]
+    refused = await _teleop(communicator, turtlebot, 0.1)
+    assert refused["ok"] is False and "held by olga" in refused["detail"]
+    assert published == [("/cmd_vel", 0.1), ("/cmd_vel", 0.1)]
+    await communicator.disconnect()
+
+
+async def test_held_teleop_audits_changes_not_repeats(operator, fleet, published):
+    from fleet.models import AuditEntry
+
+    turtlebot = fleet["turtlebot"]
+    communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
+    await communicator.receive_json_from(timeout=5)
+    for linear in (0.1, 0.1, 0.1, 0.2, 0.2, 0.0):
+        assert (await _teleop(communicator, turtlebot, linear))["ok"] is True
+    await communicator.disconnect()
+
+    @sync_to_async
+    def audited():
+        return [e.details["linear"] for e in AuditEntry.objects.filter(action="teleop").order_by("at", "pk")]
+
+    seen = []
+    for _ in range(50):
+        seen = await audited()
+        if len(seen) == 3:
+            break
+        await asyncio.sleep(0.05)
+    assert seen == [0.1, 0.2, 0.0]
+    assert len(published) == 6
+
+
+async def test_a_link_that_is_down_is_said_in_words(operator, fleet):
+    """No simulator on the robot's endpoint: the press is answered with the reason, nothing crashes."""
+    turtlebot = fleet["turtlebot"]
+    communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
+    await communicator.receive_json_from(timeout=5)
+    reply = await _teleop(communicator, turtlebot, 0.1)
+    assert reply["ok"] is False and "cannot reach ws://127.0.0.1:9091" in reply["detail"]
+    await communicator.disconnect()
+
+
+@pytest.fixture
+def recorded(monkeypatch):
+    """The order things happen in a stop: zeros published from the loop, then control.stop in a thread."""
+    import fleet
+
+    events = []
+
+    class FakeLink:
+        async def publish(self, topic, message, type_):
+            events.append(("published", topic, message.get("linear", {}).get("x")))
+
+    async def client(url, connect_timeout=2.0):
+        return FakeLink()
+
+    class Control:
+        @staticmethod
+        def stop(robots, user):
+            events.append(("control.stop", sorted(robot.name for robot in robots)))
+            return {robot.name: "stopped" for robot in robots}
+
+    monkeypatch.setattr("robots.rosbridge.pool.client", client)
+    monkeypatch.setitem(__import__("sys").modules, "fleet.control", Control)
+    monkeypatch.setattr(fleet, "control", Control, raising=False)
+    return events
+
+
+async def test_a_stop_publishes_zero_before_any_database_work(operator, fleet, recorded):
+    from fleet import fast_stop
+    from fleet.execution import coordination
+
+    turtlebot = fleet["turtlebot"]
+    communicator = await _connect("/ws/fleet/", operator)
+    await communicator.receive_json_from(timeout=5)
+    await fast_stop.TARGETS._load()  # what connect started in the background, done now for the test
+    await communicator.send_json_to({"command": "stop", "robots": [turtlebot.pk], "ref": 3})
+    reply = await communicator.receive_json_from(timeout=5)
+    assert reply["ok"] is True and reply["ref"] == 3
+    assert recorded == [("published", "/cmd_vel", 0.0), ("control.stop", ["turtlebot"])]
+    flag = await sync_to_async(coordination.connection().get)(coordination.key("stop", turtlebot.pk))
+    assert flag is not None  # raised before the zero: a running instruction publishes nothing more
+    await communicator.disconnect()
+
+
+async def test_a_viewer_stop_publishes_nothing(viewer, fleet, recorded):
+    from fleet import fast_stop
+
+    communicator = await _connect("/ws/fleet/", viewer)
+    await communicator.receive_json_from(timeout=5)
+    await fast_stop.TARGETS._load()
+    await communicator.send_json_to({"command": "stop", "robots": "all"})
+    reply = await communicator.receive_json_from(timeout=5)
+    assert reply["ok"] is False and "may only view" in reply["detail"]
+    assert recorded == []
+    await communicator.disconnect()
+
+
+async def test_presses_that_come_together_are_checked_in_one_call(operator, fleet, published, monkeypatch):
+    from fleet import control
+
+    calls = []
+    real = control.teleop_grants
+
+    def teleop_grants(robot_ids, user):
+        calls.append(sorted(robot_ids))
+        return real(robot_ids, user)
+
+    monkeypatch.setattr(control, "teleop_grants", teleop_grants)
+    turtlebot, husky = fleet["turtlebot"], fleet["husky"]
+    communicator = await _connect("/ws/fleet/", operator)
+    await communicator.receive_json_from(timeout=5)
+    for robot in (turtlebot, husky):
+        await communicator.send_json_to(
+            {"command": "teleop", "robot": robot.pk, "linear": 0.1, "ref": robot.name}
+        )
+    replies = {}
+    while len(replies) < 2:
+        reply = await communicator.receive_json_from(timeout=5)
+        if reply.get("type") == "command.result":
+            replies[reply["ref"]] = reply
+    assert replies["turtlebot"]["ok"] is True
+    assert replies["husky"]["ok"] is False and "no move topic" in replies["husky"]["detail"]
+    assert calls == [sorted([turtlebot.pk, husky.pk])]
     await communicator.disconnect()

@@ -10,7 +10,6 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
-import socket
 import threading
 import time
 
@@ -19,12 +18,7 @@ from websockets.asyncio.server import serve
 from simworker import rosapi
 from simworker.graph import Graph
 from simworker.server import RosbridgeServer
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from simworker.testing import free_port
 
 
 class LoopThread:
