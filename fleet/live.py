@@ -211,12 +211,12 @@ def _robot_row(robot, holders: dict, current: dict, goals: dict, cached: dict) -
     }
 
 
-def _current_work(robot_ids) -> tuple[dict, dict]:
+def current_work(robot_ids, running_only: bool = False) -> tuple[dict, dict]:
     """Per robot: the instruction it is working on ({id, text, status}) and its goal ({name, x, y})."""
     from fleet.models import Execution
 
     current, goals = {}, {}
-    active = ("running", "queued")
+    active = ("running",) if running_only else ("running", "queued")
     rows = Execution.objects.filter(robot_id__in=robot_ids, status__in=active).select_related("instruction")
     for execution in rows.order_by("created_at"):
         if execution.robot_id in current:
@@ -252,7 +252,7 @@ def robot_rows(robots) -> list[dict]:
             "robot_id", "user__username"
         )
     )
-    current, goals = _current_work(ids)
+    current, goals = current_work(ids)
     try:
         cached = cache.get_many([POSE_CACHE_KEY.format(id=pk) for pk in ids])
     except Exception:  # a missing cache only costs the first tick of poses

@@ -64,7 +64,8 @@ def _planner(map_id: int, version: str, radius: float) -> Planner:
 
 
 def robots_in_the_way(robot, start: tuple[float, float]) -> list[tuple[float, float, float]]:
-    """Other robots near the start as discs (x, y, radius), from the poses the links process last pushed."""
+    """Other robots near the start as discs (x, y, radius): where the links process last saw them, and where
+    those under way are going (they will stand there when we pass)."""
     from django.core.cache import cache
 
     from fleet import live
@@ -72,10 +73,13 @@ def robots_in_the_way(robot, start: tuple[float, float]) -> list[tuple[float, fl
 
     others = {r.pk: r for r in Robot.objects.exclude(pk=robot.pk).only("pk", "footprint")}
     poses = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in others])
+    spots = [(pose["id"], pose["x"], pose["y"]) for pose in poses.values() if pose.get("id") in others]
+    _, goals = live.current_work(list(others), running_only=True)
+    spots += [(pk, goal["x"], goal["y"]) for pk, goal in goals.items()]
     return [
-        (pose["x"], pose["y"], reach_radius(others[pose["id"]].footprint))
-        for pose in poses.values()
-        if pose.get("id") in others and math.dist(start, (pose["x"], pose["y"])) < NEARBY_M
+        (x, y, reach_radius(others[pk].footprint))
+        for pk, x, y in spots
+        if math.dist(start, (x, y)) < NEARBY_M
     ]
 
 

@@ -57,6 +57,19 @@ def test_turtlebot_reaches_a_goal_behind_the_crate(turtle_world, fleet_admin):
     assert math.dist((x, y), BEHIND_CRATE) < 0.15
 
 
+def _min_clearance(start, waypoints, point) -> float:
+    legs = zip([start, *waypoints], waypoints, strict=False)
+    samples = [
+        (a[0] + (e[0] - a[0]) * t / 50, a[1] + (e[1] - a[1]) * t / 50) for a, e in legs for t in range(51)
+    ]
+    return min(math.dist(point, p) for p in samples)
+
+
+B, C, I_ = (-2.0, 2.0), (2.0, -2.0), (-1.0, 1.0)  # I lies on the straight line from B to C
+SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
+BIG_SQUARE = [[-0.3, -0.3], [-0.3, 0.3], [0.3, 0.3], [0.3, -0.3]]
+
+
 @pytest.mark.django_db
 def test_route_goes_around_a_robot_parked_on_the_way():
     from django.core.cache import cache
@@ -64,23 +77,33 @@ def test_route_goes_around_a_robot_parked_on_the_way():
     from fleet import live
 
     load_world_into_db("paper")
-    square = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
-    robot = Robot.objects.create(name="tb", endpoint="ws://x/1", footprint=square)
-    parked = Robot.objects.create(
-        name="parked", endpoint="ws://x/2", footprint=[[-0.3, -0.3], [-0.3, 0.3], [0.3, 0.3], [0.3, -0.3]]
-    )
-    b, c, i = (-2.0, 2.0), (2.0, -2.0), (-1.0, 1.0)  # I lies on the straight line from B to C
-    assert route(robot, b, c) == [c]
+    robot = Robot.objects.create(name="tb", endpoint="ws://x/1", footprint=SQUARE)
+    parked = Robot.objects.create(name="parked", endpoint="ws://x/2", footprint=BIG_SQUARE)
+    assert route(robot, B, C) == [C]
     cache.set(
-        live.POSE_CACHE_KEY.format(id=parked.pk), {"id": parked.pk, "x": i[0], "y": i[1], "yaw": 0.0}, 30
+        live.POSE_CACHE_KEY.format(id=parked.pk), {"id": parked.pk, "x": I_[0], "y": I_[1], "yaw": 0.0}, 30
     )
     try:
-        around = route(robot, b, c)
+        around = route(robot, B, C)
     finally:
         cache.delete(live.POSE_CACHE_KEY.format(id=parked.pk))
-    assert around[-1] == c and len(around) >= 2
-    legs = zip([b, *around], around, strict=False)
-    samples = [
-        (a[0] + (e[0] - a[0]) * t / 50, a[1] + (e[1] - a[1]) * t / 50) for a, e in legs for t in range(51)
-    ]
-    assert min(math.dist(i, p) for p in samples) > 0.3 + 0.1  # clear of the parked robot's body
+    assert around[-1] == C and len(around) >= 2
+    assert _min_clearance(B, around, I_) > 0.3 + 0.1  # clear of the parked robot's body
+
+
+@pytest.mark.django_db
+def test_route_keeps_clear_of_where_a_robot_under_way_is_going(fleet_admin):
+    """Table 12's last slot: TIAGo drives to I while robot1 goes from B to C, across I."""
+    from fleet.models import Execution, Instruction
+
+    load_world_into_db("paper")
+    robot = Robot.objects.create(name="tb", endpoint="ws://x/1", footprint=SQUARE)
+    tiago = Robot.objects.create(name="tiago", endpoint="ws://x/2", footprint=BIG_SQUARE)
+    instruction = Instruction.objects.create(text="move tiago to I", user=fleet_admin)
+    going = {"action": "move", "destination": {"name": "I", "x": I_[0], "y": I_[1]}}
+    execution = Execution.objects.create(instruction=instruction, robot=tiago, steps=[going])
+    assert route(robot, B, C) == [C]  # queued, not yet under way: nothing to keep clear of
+    execution.status = Execution.Status.RUNNING
+    execution.save()
+    around = route(robot, B, C)
+    assert around[-1] == C and _min_clearance(B, around, I_) > 0.3 + 0.1
