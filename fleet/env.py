@@ -49,10 +49,13 @@ def env_database(name: str, default_sqlite: Path) -> dict:
     if not raw:
         # IMMEDIATE: several robots' runners write at once; a deferred transaction that later upgrades its
         # lock fails at once with "database is locked" instead of waiting for the timeout.
+        # The tests' database is a file too: Django's default in-memory one shares a cache between threads,
+        # where a write meeting another thread's fails at once ("table is locked") instead of waiting.
         return {
             "ENGINE": "django.db.backends.sqlite3",
             "NAME": str(default_sqlite),
             "OPTIONS": {"timeout": 20, "transaction_mode": "IMMEDIATE"},
+            "TEST": {"NAME": str(default_sqlite.with_name(f"test_{default_sqlite.name}"))},
         }
     scheme = urlparse(raw).scheme
     if scheme not in {"sqlite", "postgres", "postgresql", "pgsql", "postgis"}:
