@@ -75,7 +75,7 @@ export class RobotTable {
     status.className = "link";
     status.dataset.link = robot.link_status;
     status.textContent = robot.link_status;
-    cell("", status);
+    cell("c-link", status);
     cell("c-state", stateBadge(robot.state));
     const instruction = robot.instruction ? `#${robot.instruction.id} ${robot.instruction.text}` : "none";
     cell("c-instruction", instruction);
