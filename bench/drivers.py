@@ -61,6 +61,11 @@ class DirectDriver:
             self.held.hold(link.name, lambda lk=link: self._publish(lk, linear, angular))
         return t0
 
+    async def warm_up(self, links: list[RobotLink]) -> None:
+        """A zero command to each robot: every link in use before anything is measured."""
+        await self.start(links, 0.0, 0.0)
+        await asyncio.sleep(0.1)
+
     async def stop(self, links: list[RobotLink]) -> float:
         t0 = time.time()
         for link in links:
@@ -82,7 +87,7 @@ class PortalDriver:
         self.ws = ws  # a connected websockets client, logged in by session cookie
         self.robot_ids = robot_ids
         self.held = _Held()
-        self.replies: list[dict] = []  # the portal's command results (pushes are read and dropped)
+        self.answered = 0  # the portal's command results so far (its pushes are read and dropped)
         self._reader = asyncio.create_task(self._drain())
 
     async def _drain(self) -> None:
@@ -90,8 +95,7 @@ class PortalDriver:
         async for raw in self.ws:
             msg = json.loads(raw)
             if msg.get("type") == "command.result":
-                self.replies.append(msg)
-                del self.replies[:-1000]
+                self.answered += 1
 
     async def _send(self, payload: dict) -> None:
         await self.ws.send(json.dumps(payload))
@@ -106,6 +110,15 @@ class PortalDriver:
             await self._send(payload)
             self.held.hold(link.name, lambda p=payload: self._send(p))
         return t0
+
+    async def warm_up(self, links: list[RobotLink], timeout: float = 10.0) -> None:
+        """A zero command to each robot, until the portal answered them all: its links are open and each
+        robot's per-press checks are done, as in a portal in use (the first press is not what is measured)."""
+        answered = self.answered
+        await self.start(links, 0.0, 0.0)
+        deadline = time.monotonic() + timeout
+        while self.answered < answered + len(links) and time.monotonic() < deadline:
+            await asyncio.sleep(0.01)
 
     async def stop(self, links: list[RobotLink]) -> float:
         t0 = time.time()

@@ -349,12 +349,12 @@ def profile_stop(names: list[str], user) -> tuple[float, str]:
 
 def stop_why(stats: dict, per_call: float) -> str:
     return (
-        f"stop p50 {stats['p50']} ms, p99 {stats['p99']} ms (goal p99 ≤ 20 ms). The WebSocket stop runs "
-        f"fleet.control.stop through database_sync_to_async (one thread per process): it loads the robots, "
-        f"checks the role, marks the stop in coordination (Redis), then publishes the zero Twist from a thread "
-        f"pool, and only then cancels the queued instructions and writes the audit row; one call takes about "
-        f"{per_call:.0f} ms even on idle robots (profile below). The zero Twist leaves after the database work: "
-        "publishing it first (from the consumer, before any query) would bring the stop to the publish cost."
+        f"stop p50 {stats['p50']} ms, p99 {stats['p99']} ms (goal p99 ≤ 20 ms). The WebSocket stop first raises "
+        "the robots' stop flags (Redis) and publishes the zero Twist from the web process's event loop on its "
+        "own links (fleet/fast_stop.py), then runs fleet.control.stop in a thread (checks, a second zero, the "
+        f"queued instructions cancelled, the audit row: about {per_call:.0f} ms on idle robots, profile below). "
+        "A robot missing from the web process's stop targets (registered since their last load) or whose link "
+        "is not up yet gets its zero from that second step only."
     )
 
 

@@ -1,6 +1,6 @@
 """Interpreter throughput: instructions per second on one core after the ontology is loaded.
 
-`python -m bench.interpreter_throughput [--quick]` migrates a temporary SQLite database (FLEET_VAR_DIR), adds the
+`python -m bench.interpreter_throughput [--quick|--full]` migrates a temporary SQLite database (FLEET_VAR_DIR), adds the
 paper's demo fleet, then interprets a mix of the acceptance rows. Writes bench/results/interpreter.json.
 Without REDIS_URL the version check uses Django's local-memory cache instead of Redis.
 """
@@ -77,6 +77,7 @@ def rate(fn, texts: list[str], seconds: float) -> tuple[float, int]:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description="interpreter throughput")
     parser.add_argument("--quick", action="store_true", help="measure for 1 s instead of 5 s")
+    parser.add_argument("--full", action="store_false", dest="quick", help="the default: the whole bench")
     args = parser.parse_args(argv)
     seconds = 1.0 if args.quick else 5.0
     setup_django()

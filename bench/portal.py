@@ -6,7 +6,6 @@ removed at the end, and Redis listens on a unix socket inside it.
 
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -14,14 +13,10 @@ import time
 import urllib.request
 from pathlib import Path
 
+from simworker.testing import free_port
+
 BASE_DIR = Path(__file__).resolve().parent.parent
 BENCH_USER = "bench"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class Portal:

@@ -1,6 +1,6 @@
 """How many robots one core keeps at real-time 50 Hz physics with 20 Hz odometry streamed to a subscriber.
 
-`python -m bench.sim_capacity [--quick]` writes bench/results/sim_capacity.json.
+`python -m bench.sim_capacity [--quick|--full]` writes bench/results/sim_capacity.json.
 
 For each fleet size N the simulator runs alone in a child process pinned to CPU 0 (`--serve`), with N
 TurtleBot3s on the `extra` endpoint of the paper world. This process, pinned to CPU 1, subscribes to every
@@ -155,6 +155,7 @@ def _pin(pid: int, cpu: int) -> None:
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="three sizes, short windows")
+    parser.add_argument("--full", action="store_false", dest="quick", help="the default: the whole bench")
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve:
