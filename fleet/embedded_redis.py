@@ -91,9 +91,18 @@ def run_with_redis(socket_path: Path, command: list[str]) -> int:
     process = start(socket_path)
     env = {**os.environ, "REDIS_URL": f"unix://{socket_path}"}
     try:
-        return subprocess.call(command, env=env)
+        return call(command, env=env)
     finally:
         stop(process, socket_path)
+
+
+def call(command: list[str], **options) -> int:
+    """subprocess.call, except that a death by signal is said and returned as a shell would (128 + N)."""
+    code = subprocess.call(command, **options)
+    if code < 0:
+        print(f"{' '.join(command[:3])}: killed by {signal.Signals(-code).name}", file=sys.stderr, flush=True)
+        return 128 - code
+    return code
 
 
 def main(argv=None) -> int:

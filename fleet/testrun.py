@@ -4,9 +4,10 @@ Browser tests run wherever Debian's chromium (or FLEET_CHROMIUM) exists; elsewhe
 """
 
 import os
-import subprocess
 import sys
 from pathlib import Path
+
+from fleet.embedded_redis import call
 
 BASE_DIR = Path(__file__).resolve().parent.parent
 
@@ -24,6 +25,7 @@ def main() -> int:
         )
         args = ["-m", "not browser", *args]
     os.environ.setdefault("FLEET_REDIS_PREFIX", f"test{os.getpid()}")  # this run's own keys and groups
+    os.environ.setdefault("PYTHONFAULTHANDLER", "1")  # a crash, even during interpreter exit, shows where
     command = [sys.executable, "-m", "pytest", *args]
     if not os.environ.get("REDIS_URL"):
         command = [sys.executable, "-m", "fleet.embedded_redis", "exec", "--", *command]
@@ -34,7 +36,7 @@ def main() -> int:
         os.environ.get("REDIS_URL") or "embedded",
         flush=True,
     )
-    return subprocess.call(command, cwd=BASE_DIR)
+    return call(command, cwd=BASE_DIR)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,24 @@ from fleet.roles import ADMIN, OPERATOR, VIEWER, sync_groups
 PASSWORD = "correct-horse-battery"
 
 
+@pytest.fixture(scope="session")
+def django_db_setup(django_db_setup, django_db_blocker):
+    """pytest-django's test database, whose drop at the end is not refused for sessions other threads still hold.
+
+    Server threads (the live portal's, the execution runners') keep their connections open (CONN_MAX_AGE);
+    PostgreSQL will not drop a database anyone is connected to, so they are ended first.
+    """
+    yield
+    from django.db import connection
+
+    if connection.vendor == "postgresql":
+        with django_db_blocker.unblock(), connection.cursor() as cursor:
+            cursor.execute(
+                "SELECT pg_terminate_backend(pid) FROM pg_stat_activity"
+                " WHERE datname = current_database() AND pid <> pg_backend_pid()"
+            )
+
+
 @pytest.fixture
 def roles(db):
     """The viewer, operator and admin groups with their permissions."""

@@ -8,6 +8,8 @@ forked after the parent used a link starts its own (stack-notes: don't connect b
 from __future__ import annotations
 
 import asyncio
+import atexit
+import contextlib
 import os
 import threading
 from collections.abc import Callable
@@ -37,6 +39,19 @@ class LoopThread:
     def run(self, coro, timeout: float | None = None):
         """Run a coroutine on the loop and wait for its result."""
         return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Close every link, stop the loop and join its thread (an interpreter must not exit under a running loop)."""
+        with self.lock:
+            clients, self.clients = list(self.clients.values()), {}
+        if self.thread.is_alive():
+            # on a timeout the loop stops anyway and the sockets close with the process
+            with contextlib.suppress(TimeoutError):
+                self.run(_close_all(clients), timeout)
+            self.loop.call_soon_threadsafe(self.loop.stop)
+            self.thread.join(timeout)
+        if not self.thread.is_alive():
+            self.loop.close()
 
 
 class SyncClient:
@@ -89,9 +104,26 @@ class SyncClient:
         self._run(self.client.close())
 
 
+async def _close_all(clients: list[SyncClient]) -> None:
+    await asyncio.gather(*(c.client.close() for c in clients), return_exceptions=True)
+
+
 @cache
 def _runner(pid: int) -> LoopThread:
+    atexit.register(_stop_runner, pid)
     return LoopThread()
+
+
+def _stop_runner(pid: int) -> None:
+    if pid == os.getpid():  # a forked child inherits the parent's atexit list, not its loop thread
+        shutdown()
+
+
+def shutdown() -> None:
+    """Stop this process's loop thread and close its links; a later get_client() starts afresh."""
+    if _runner.cache_info().currsize:
+        _runner(os.getpid()).stop()
+        _runner.cache_clear()
 
 
 def get_client(url: str) -> SyncClient:

@@ -3,7 +3,9 @@
 import pytest
 
 from fleet.models import Location, Map, TimeSlot
+from fleet.testrun import chromium_path
 from robots.models import Binding, Robot
+from simworker.testing import free_port
 
 
 @pytest.fixture
@@ -54,22 +56,6 @@ CHROMIUM_ARGS = [
 ]  # fmt: skip
 
 
-def chromium_path():
-    import os
-    from pathlib import Path
-
-    path = os.environ.get("FLEET_CHROMIUM", "/usr/bin/chromium")
-    return path if Path(path).exists() else None
-
-
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
 def _fresh_interpreter():
     """The server is a fresh process: forget robots and places an earlier test's database gave the interpreter."""
     try:
@@ -93,8 +79,15 @@ def live_url(transactional_db, settings):
     # execution's Redis keys (stop flags live 10 min) must not carry over between runs that reuse robot ids
     settings.FLEET_EXEC_KEY_PREFIX = f"test:portal:{uuid.uuid4().hex[:8]}"
     _fresh_interpreter()
-    port = _free_port()
-    config = uvicorn.Config(application, host="127.0.0.1", port=port, log_level="warning", lifespan="off")
+    port = free_port()
+    config = uvicorn.Config(
+        application,
+        host="127.0.0.1",
+        port=port,
+        log_level="warning",
+        lifespan="off",
+        timeout_graceful_shutdown=3,
+    )
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
     thread.start()
@@ -106,6 +99,11 @@ def live_url(transactional_db, settings):
     yield f"http://127.0.0.1:{port}"
     server.should_exit = True
     thread.join(timeout=10)
+    if thread.is_alive():  # a daemon thread still serving at interpreter exit can crash it (uvloop)
+        server.force_exit = True
+        thread.join(timeout=5)
+    if thread.is_alive():
+        raise RuntimeError(f"uvicorn on port {port} did not stop within 15 s of the test's end")
 
 
 @pytest.fixture

@@ -3,8 +3,11 @@
 Runs against the other apps (simworker, registration, interpreter, execution); Celery runs tasks eagerly here.
 """
 
+import time
+
 import pytest
 
+from fleet.models import Execution
 from tests.portal.demo import demo_urls, demo_world, pose_stream
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.timeout(180)]
@@ -61,3 +64,10 @@ def test_register_instruct_watch_answer_and_stop(seeded_terms, login, fleet_admi
             assert "turtlebot" in page.locator(".toast:has-text('Stopped')").first.inner_text()
             # the answered instruction comes back understood, now with a synonym
             page.wait_for_selector(".parse:has-text('type II')", timeout=90000)
+
+            # and a second stop ends it: nothing may still run (in the server's thread) when the world goes away
+            page.get_by_role("button", name="STOP ALL").click()
+            deadline = time.monotonic() + 30
+            while Execution.objects.filter(status__in=("queued", "running")).exists():
+                assert time.monotonic() < deadline, "an execution kept running after STOP ALL"
+                time.sleep(0.1)

@@ -6,7 +6,7 @@ import threading
 import pytest
 
 from robots.rosbridge import LinkDown, ServiceError
-from robots.rosbridge.sync import get_client
+from robots.rosbridge.sync import get_client, shutdown
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -54,3 +54,16 @@ def test_closing_lets_the_next_caller_open_a_fresh_link(endpoint):
     assert second is not first
     assert second.call_service("/rosapi/topic_type", {"topic": "/scan"})["type"] == "sensor_msgs/LaserScan"
     second.close()
+
+
+def test_shutdown_closes_the_links_and_stops_the_loop_thread(endpoint):
+    ep = endpoint()
+    client = get_client(ep.url)
+    loop_thread = client.runner.thread
+    shutdown()
+    assert not loop_thread.is_alive()
+    assert not client.client.is_connected
+    fresh = get_client(ep.url)  # the process can still reach robots afterwards, on a new loop
+    assert fresh.runner.thread is not loop_thread
+    assert fresh.call_service("/rosapi/topic_type", {"topic": "/odom"}) == {"type": "nav_msgs/Odometry"}
+    fresh.close()
