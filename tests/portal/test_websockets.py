@@ -160,19 +160,24 @@ async def test_unknown_and_malformed_commands_are_answered_not_crashed(operator,
     await communicator.disconnect()
 
 
-@pytest.fixture
-def published(monkeypatch):
-    """What the sockets' teleop publishes on the robots' links: (topic, linear x)."""
-    sent = []
+def _record_publishes(monkeypatch, record) -> None:
+    """The sockets' rosbridge links (robots.rosbridge.pool) hand every publish to record(topic, message)."""
 
     class FakeLink:
         async def publish(self, topic, message, type_):
-            sent.append((topic, message["linear"]["x"]))
+            record(topic, message)
 
     async def client(url, connect_timeout=2.0):
         return FakeLink()
 
     monkeypatch.setattr("robots.rosbridge.pool.client", client)
+
+
+@pytest.fixture
+def published(monkeypatch):
+    """What the sockets' teleop publishes on the robots' links: (topic, linear x)."""
+    sent = []
+    _record_publishes(monkeypatch, lambda topic, message: sent.append((topic, message["linear"]["x"])))
     return sent
 
 
@@ -266,13 +271,10 @@ def recorded(monkeypatch):
     import fleet
 
     events = []
-
-    class FakeLink:
-        async def publish(self, topic, message, type_):
-            events.append(("published", topic, message.get("linear", {}).get("x")))
-
-    async def client(url, connect_timeout=2.0):
-        return FakeLink()
+    _record_publishes(
+        monkeypatch,
+        lambda topic, message: events.append(("published", topic, message.get("linear", {}).get("x"))),
+    )
 
     class Control:
         @staticmethod
@@ -280,7 +282,6 @@ def recorded(monkeypatch):
             events.append(("control.stop", sorted(robot.name for robot in robots)))
             return {robot.name: "stopped" for robot in robots}
 
-    monkeypatch.setattr("robots.rosbridge.pool.client", client)
     monkeypatch.setitem(__import__("sys").modules, "fleet.control", Control)
     monkeypatch.setattr(fleet, "control", Control, raising=False)
     return events
