@@ -82,6 +82,7 @@ def test_unknown_robot_and_missing_robot_are_refused_in_words(table12_world, fle
 def test_a_robot_held_by_another_operator_is_refused(table12_world, operator, second_operator):
     from fleet.leases import take
 
+    TimeSlot.objects.filter(robot__name="tiago").update(enabled=False)  # free at any hour the test runs
     take(second_operator, Robot.objects.get(name="tiago"))
     instruction = submit("move tiago to G", operator, parse=parse(step(["tiago"], 1.0, -1.0, "G")))
     assert instruction.status == "refused"
