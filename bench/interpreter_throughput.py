@@ -5,7 +5,6 @@ paper's demo fleet, then interprets a mix of the acceptance rows. Writes bench/r
 Without REDIS_URL the version check uses Django's local-memory cache instead of Redis.
 """
 
-import argparse
 import json
 import os
 import sys
@@ -13,7 +12,9 @@ import tempfile
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent / "results" / "interpreter.json"
+from bench import component
+
+RESULT_FILE = "interpreter.json"
 TSV = Path(__file__).resolve().parents[2] / "shared" / "acceptance" / "instructions.tsv"
 EXTRA = [
     "mvoe husy to the room 2 very fast",
@@ -75,11 +76,8 @@ def rate(fn, texts: list[str], seconds: float) -> tuple[float, int]:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description="interpreter throughput")
-    parser.add_argument("--quick", action="store_true", help="measure for 1 s instead of 5 s")
-    parser.add_argument("--full", action="store_false", dest="quick", help="the default: the whole bench")
-    args = parser.parse_args(argv)
-    seconds = 1.0 if args.quick else 5.0
+    args = component.parser("interpreter throughput (--quick: 1 s per rate instead of 5 s)").parse_args(argv)
+    seconds = 1.0 if args.mode == "quick" else 5.0
     setup_django()
     add_fleet()
     from interpreter.parser import interpret as parse
@@ -101,8 +99,7 @@ def main(argv=None) -> dict:
         "goal_per_s": 2000,
         "seconds": seconds,
     }
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
+    component.write(args.out, RESULT_FILE, result)
     print(json.dumps(result))
     return result
 

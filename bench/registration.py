@@ -12,9 +12,7 @@ Identification is timed on the Graph discovery returned for a 1,200-topic endpoi
 
 from __future__ import annotations
 
-import argparse
 import asyncio
-import json
 import os
 import statistics
 import sys
@@ -22,7 +20,9 @@ import tempfile
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "registration.json"
+from bench import component
+
+RESULT_FILE = "registration.json"
 MODES = {"quick": {"repeats": 1, "ident_runs": 20}, "full": {"repeats": 3, "ident_runs": 200}}
 
 
@@ -119,10 +119,8 @@ async def identification_time(runs: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_const", const="quick", dest="mode")
-    parser.add_argument("--full", action="store_const", const="full", dest="mode")
-    mode = parser.parse_args(argv).mode or "full"
+    args = component.parser(__doc__.splitlines()[0]).parse_args(argv)
+    mode = args.mode
     cfg = MODES[mode]
     with tempfile.TemporaryDirectory() as tmp:
         setup_django(str(Path(tmp) / "bench.sqlite3"))
@@ -135,9 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     data["cpus"] = os.cpu_count()
     data["load"] = os.getloadavg()[0]
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(data, indent=2))
-    print(f"wrote {RESULTS}")
+    print(f"wrote {component.write(args.out, RESULT_FILE, data)}")
     return 0
 
 

@@ -54,11 +54,10 @@ MODES = {
         "exec_limit_s": 3600,
     },
 }
-COMPONENT_FILES = {"interpreter_throughput": ("interpreter_throughput.json", "interpreter.json")}
-COMPONENTS = {  # bench module (owned by its component's engineer) -> summary keys it may report
-    "sim_capacity": ("sim_realtime_robots",),
-    "interpreter_throughput": ("interpreter_per_s",),
-    "registration": ("registration_s", "identification_ms_1200_topics"),
+COMPONENTS = {  # bench module (owned by its component's engineer) -> (the JSON it writes, summary keys in it)
+    "sim_capacity": ("sim_capacity.json", ("sim_realtime_robots",)),
+    "interpreter_throughput": ("interpreter.json", ("interpreter_per_s",)),
+    "registration": ("registration.json", ("registration_s", "identification_ms_1200_topics")),
 }
 
 
@@ -446,10 +445,10 @@ def auto_register(urls: list[str]):
     return register_endpoints(urls)
 
 
-def run_components(mode: str, timeout: int, env: dict) -> dict[str, dict]:
-    """The component benches other engineers own: run each as `python -m bench.<name> --<mode>`."""
+def run_components(mode: str, timeout: int, env: dict, out_dir: Path) -> dict[str, dict]:
+    """The component benches: run each as `python -m bench.<name> --<mode> --out <out_dir>`."""
     out = {}
-    for name, keys in COMPONENTS.items():
+    for name, (filename, keys) in COMPONENTS.items():
         title = f"component bench bench/{name}.py"
         if not (RESULTS.parent / f"{name}.py").exists():
             out[f"component_{name}"] = result(title, "skipped", reason=f"bench/{name}.py does not exist yet")
@@ -457,7 +456,7 @@ def run_components(mode: str, timeout: int, env: dict) -> dict[str, dict]:
         print(f"[bench] {name} ...", flush=True)
         try:
             proc = subprocess.run(
-                [sys.executable, "-m", f"bench.{name}", f"--{mode}"],
+                [sys.executable, "-m", f"bench.{name}", f"--{mode}", "--out", str(out_dir)],
                 cwd=RESULTS.parent.parent,
                 capture_output=True,
                 env={**os.environ, **env},
@@ -467,13 +466,11 @@ def run_components(mode: str, timeout: int, env: dict) -> dict[str, dict]:
         except subprocess.TimeoutExpired:
             out[f"component_{name}"] = result(title, "error", reason=f"did not finish within {timeout} s")
             continue
-        out[f"component_{name}"] = _component_result(name, title, keys, proc)
+        out[f"component_{name}"] = _component_result(out_dir / filename, title, keys, proc)
     return out
 
 
-def _component_result(name: str, title: str, keys, proc) -> dict:
-    paths = [RESULTS / f for f in COMPONENT_FILES.get(name, (f"{name}.json",))]
-    path = next((p for p in paths if p.exists()), paths[0])
+def _component_result(path: Path, title: str, keys, proc) -> dict:
     if proc.returncode != 0 or not path.exists():
         return result(title, "error", reason=f"exit {proc.returncode}: {(proc.stderr or proc.stdout)[-800:]}")
     data = json.loads(path.read_text())
@@ -498,7 +495,11 @@ async def bench_async(mode: str, portal, only: set[str] | None = None) -> dict:
 
 
 def run_fleet(
-    mode: str, no_components: bool = False, only: set[str] | None = None, keep: bool = False
+    mode: str,
+    out_dir: Path = RESULTS,
+    no_components: bool = False,
+    only: set[str] | None = None,
+    keep: bool = False,
 ) -> dict:
     """Set the private portal up (synchronously: Django's ORM refuses an event loop), then run the bench."""
     from bench.portal import Portal
@@ -506,7 +507,8 @@ def run_fleet(
     portal = Portal()
     try:
         portal.setup()
-        results = {} if no_components else run_components(mode, MODES[mode]["component_timeout"], portal.env)
+        timeout = MODES[mode]["component_timeout"]
+        results = {} if no_components else run_components(mode, timeout, portal.env, out_dir)
         return results | asyncio.run(bench_async(mode, portal, only))
     finally:
         portal.close(keep=keep)
@@ -529,7 +531,7 @@ def main(argv: list[str] | None = None) -> int:
     only = {n for n in args.only.split(",") if n} or None
     if only and args.out == RESULTS:
         args.out = Path(tempfile.mkdtemp(prefix="bench-only-"))  # a partial run never replaces the results
-    results = run_fleet(mode, args.no_components or bool(only), only, args.keep)
+    results = run_fleet(mode, args.out, args.no_components or bool(only), only, args.keep)
     meta = {"mode": mode, "seconds": round(time.time() - started), "at": time.strftime("%Y-%m-%d %H:%M:%S")}
     summary = report.write_all(results, args.out, mode, meta)
     print(report.render_headline(summary))

@@ -22,7 +22,9 @@ import threading
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "sim_capacity.json"
+from bench import component
+
+RESULT_FILE = "sim_capacity.json"
 FULL_SIZES = [100, 250, 400, 500, 600, 700, 800, 1000]
 QUICK_SIZES = [100, 300, 500]
 STEP_HZ, ODOM_HZ, CMD_HZ = 50.0, 20.0, 2.0
@@ -153,16 +155,14 @@ def _pin(pid: int, cpu: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="three sizes, short windows")
-    parser.add_argument("--full", action="store_false", dest="quick", help="the default: the whole bench")
+    parser = component.parser(__doc__.splitlines()[0])
     parser.add_argument("--serve", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve:
         serve(args.serve)
         return {}
     _pin(0, 1)
-    sizes, warmup, window = (QUICK_SIZES, 2.0, 4.0) if args.quick else (FULL_SIZES, 3.0, 10.0)
+    sizes, warmup, window = (QUICK_SIZES, 2.0, 4.0) if args.mode == "quick" else (FULL_SIZES, 3.0, 10.0)
     runs = []
     for n in sizes:
         runs.append(measure(n, warmup, window))
@@ -174,13 +174,12 @@ def main(argv: list[str] | None = None) -> dict:
         "sim_realtime_robots": max(passing, default=0),
         "goal": 500,
         "criteria": "physics >= 98% of 50 Hz steps, no step later than 0.1 s, no resync, >= 95% of N x 20 Hz odometry received",
-        "mode": "quick" if args.quick else "full",
+        "mode": args.mode,
         "load_avg_1min": os.getloadavg()[0],
         "cpus": os.cpu_count(),
         "runs": runs,
     }
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
+    component.write(args.out, RESULT_FILE, result)
     print(json.dumps({k: result[k] for k in ("sim_realtime_robots", "mode", "load_avg_1min")}))
     return result
 
