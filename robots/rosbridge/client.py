@@ -210,8 +210,12 @@ class RosbridgeClient:
                 delay = min(delay * 2, self.max_backoff)
                 continue
             delay = self.min_backoff
-            with contextlib.suppress(asyncio.CancelledError):
+            try:
                 await self._reader
+            except asyncio.CancelledError:
+                if asyncio.current_task().cancelling():
+                    raise  # this task is cancelled (close(), or its loop shutting down): stop reconnecting
+                # only the reader was cancelled: a drop like any other, reconnect
 
     async def _read(self, ws: ClientConnection) -> None:
         reason = "connection closed"

@@ -105,7 +105,12 @@ class SyncClient:
 
 
 async def _close_all(clients: list[SyncClient]) -> None:
+    """Close the links, then end what else runs on the loop (the WebSockets' keepalives), as asyncio.run would."""
     await asyncio.gather(*(c.client.close() for c in clients), return_exceptions=True)
+    others = asyncio.all_tasks() - {asyncio.current_task()}
+    for task in others:
+        task.cancel()
+    await asyncio.gather(*others, return_exceptions=True)
 
 
 @cache

@@ -103,6 +103,10 @@ def live_url(transactional_db, settings):
         server.force_exit = True
         thread.join(timeout=5)
     if thread.is_alive():
+        import faulthandler
+        import sys
+
+        faulthandler.dump_traceback(sys.stderr)  # where every thread is: what holds the server up
         raise RuntimeError(f"uvicorn on port {port} did not stop within 15 s of the test's end")
 
 

@@ -120,3 +120,22 @@ async def test_ros2_action_goal_gets_its_result(paper_world):
         await client.cancel_action_goal(goal)
         result = await goal.wait(5)
     assert result["status"] in (5, 6)  # canceled (or aborted if it could not start)
+
+
+async def test_a_kept_link_lets_its_loop_shut_down(endpoint):
+    """A start()ed client nobody closed (a web process's links at shutdown) must not hold asyncio.run open."""
+    import threading
+
+    ep = endpoint()
+    connected = []
+
+    async def serve_and_leave():
+        client = RosbridgeClient(ep.url, ping_interval=1.0)
+        await client.start()
+        connected.append(await client.wait_connected(3))
+
+    runner = threading.Thread(target=asyncio.run, args=(serve_and_leave(),), daemon=True)
+    runner.start()
+    await asyncio.to_thread(runner.join, 5)  # asyncio.run cancels the supervisor on the way out
+    assert connected == [True]
+    assert not runner.is_alive(), "the reconnect loop swallowed its own cancellation"
