@@ -1,5 +1,6 @@
-// The dashboard and the robot list: live table, live map, console; map clicks send the selected robots.
-import { toast } from "./api.js";
+// The dashboard and the robot list: live table, live map, console; map clicks send the selected robots,
+// the robot list's buttons stop them or take or release control of them.
+import { request, toast } from "./api.js";
 import { Console } from "./console.js";
 import { connectLive } from "./live.js";
 import { FleetMap } from "./map.js";
@@ -16,6 +17,23 @@ function sendSelected(target) {
   const where = target.name ? target.name : `(${target.x}, ${target.y})`;
   robots.forEach((robot) => console_.submit(`move ${robot.name} to ${where}`));
 }
+
+async function forSelected(action) {
+  const robots = table.selected();
+  if (!robots.length) { toast("Select one or more robots in the table first.", true); return; }
+  if (action === "stop") {
+    try { toast((await request("/control/stop/", { robots: robots.map((robot) => robot.id) })).detail); }
+    catch (error) { toast(`Stop refused: ${error.message}`, true); }
+    return;
+  }
+  // one lease per robot: each answer is said (a robot held by someone else is refused in words)
+  const replies = await Promise.allSettled(robots.map((robot) => request(`/robots/${robot.id}/lease/`, { action })));
+  replies.forEach((reply, i) => {
+    if (reply.status === "fulfilled") table.update(robots[i].id, { holder: reply.value.holder });
+    toast(reply.status === "fulfilled" ? reply.value.detail : `${robots[i].name}: ${reply.reason.message}`, reply.status !== "fulfilled");
+  });
+}
+document.querySelectorAll("button[data-selected]").forEach((button) => button.addEventListener("click", () => forSelected(button.dataset.selected)));
 
 const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, sendSelected) : null;
 document.querySelectorAll("button.goto").forEach((button) => button.addEventListener("click", () => sendSelected({ name: button.dataset.location })));

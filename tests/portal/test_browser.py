@@ -1,5 +1,7 @@
 """The portal in a real browser (Playwright driving Debian's chromium against a live ASGI server)."""
 
+import threading
+
 import pytest
 
 from fleet import leases
@@ -66,6 +68,34 @@ def test_operator_sees_the_lease_taken_elsewhere_live(login, operator, second_op
     _live(page)
     page.get_by_role("button", name="Take control").click()
     watcher.wait_for_selector("#robot-table tr[data-name=turtlebot] .held:has-text('held by otto')")
+
+
+def test_robot_list_takes_stops_and_releases_the_selected_robots(
+    login, operator, second_operator, fleet, live_url
+):
+    turtlebot, husky = fleet["turtlebot"], fleet["husky"]
+    taking = threading.Thread(target=leases.take, args=(second_operator, husky))  # off Playwright's loop
+    taking.start()
+    taking.join()
+    page = login(operator)
+    page.goto(f"{live_url}/robots/")
+    _live(page)
+    page.get_by_role("button", name="Take control").click()
+    page.wait_for_selector(".toast.bad:has-text('Select one or more robots')")  # nothing selected yet
+
+    page.get_by_label("Select turtlebot").check()
+    page.get_by_label("Select husky").check()
+    page.get_by_role("button", name="Take control").click()
+    page.wait_for_selector("#robot-table tr[data-name=turtlebot] .held:has-text('held by otto')")
+    page.wait_for_selector(".toast.bad:has-text('husky')")  # olga holds it: refused in words, not taken
+    assert leases.holder(turtlebot) == operator and leases.holder(husky) == second_operator
+
+    page.get_by_role("button", name="Stop selected").click()
+    page.wait_for_selector(".toast:not(.bad):has-text('turtlebot')")
+
+    page.get_by_role("button", name="Release control").click()
+    page.wait_for_selector("#robot-table tr[data-name=turtlebot] .held:has-text('free')")
+    assert leases.holder(turtlebot) is None and leases.holder(husky) == second_operator
 
 
 def test_usable_on_a_768px_tablet(login, operator, fleet):
