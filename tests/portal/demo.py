@@ -21,7 +21,10 @@ def pose_stream():
         stop = asyncio.Event()
         state["stop"] = stop
         robots = list(Robot.objects.prefetch_related("bindings"))
-        loop.run_until_complete(follow(robots, PoseHub(), stop))
+        try:
+            loop.run_until_complete(follow(robots, PoseHub(), stop))
+        finally:
+            loop.close()
 
     thread = threading.Thread(target=run, name="poses", daemon=True)
     thread.start()

@@ -47,6 +47,8 @@ class LoopThread:
     def close(self) -> None:
         self.loop.call_soon_threadsafe(self.loop.stop)
         self.thread.join(5)
+        if not self.thread.is_alive():
+            self.loop.close()  # not left to the collector, which would close it under another test's loop
 
 
 def robot_graph(graph: Graph, ns: str = "", name: str = "fakebot", wheels: int = 2) -> None:
