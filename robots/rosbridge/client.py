@@ -12,7 +12,6 @@ format is roslibpy's (robots/rosbridge/codec.py, checked against roslibpy in tes
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import socket
 from collections.abc import Callable
@@ -152,14 +151,12 @@ class RosbridgeClient:
         self._closing = True
         if self._supervisor is not None:
             self._supervisor.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._supervisor
+            await _ended(self._supervisor)
         ws, self._ws = self._ws, None
         if ws is not None:
             await ws.close()
         if self._reader is not None:
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._reader
+            await _ended(self._reader)
         self._fail_waiting(LinkDown(f"{self.url}: closed"))
 
     async def __aenter__(self) -> RosbridgeClient:
@@ -210,12 +207,7 @@ class RosbridgeClient:
                 delay = min(delay * 2, self.max_backoff)
                 continue
             delay = self.min_backoff
-            try:
-                await self._reader
-            except asyncio.CancelledError:
-                if asyncio.current_task().cancelling():
-                    raise  # this task is cancelled (close(), or its loop shutting down): stop reconnecting
-                # only the reader was cancelled: a drop like any other, reconnect
+            await _ended(self._reader)  # a reader cancelled alone is a drop like any other: reconnect
 
     async def _read(self, ws: ClientConnection) -> None:
         reason = "connection closed"
@@ -388,3 +380,12 @@ class RosbridgeClient:
 
     async def cancel_action_goal(self, goal: ActionGoal) -> None:
         await self._send(codec.cancel_action_goal(goal.id, goal.action))
+
+
+async def _ended(task: asyncio.Task) -> None:
+    """Wait for task to end, its cancellation included; but if the caller is the one cancelled, that goes on."""
+    try:
+        await task
+    except asyncio.CancelledError:
+        if asyncio.current_task().cancelling():
+            raise  # the caller is cancelled (a close, or its loop shutting down)
