@@ -91,7 +91,7 @@ def test_robot_list_takes_stops_and_releases_the_selected_robots(
     assert leases.holder(turtlebot) == operator and leases.holder(husky) == second_operator
 
     page.get_by_role("button", name="Stop selected").click()
-    page.wait_for_selector(".toast:not(.bad):has-text('turtlebot')")
+    page.wait_for_selector(".toast:not(.bad):has-text('Stopped'):has-text('turtlebot')")
 
     page.get_by_role("button", name="Release control").click()
     page.wait_for_selector("#robot-table tr[data-name=turtlebot] .held:has-text('free')")
