@@ -75,6 +75,15 @@ def client_for(client):
     return _login
 
 
+@pytest.fixture
+def eager_celery(monkeypatch):
+    """Celery tasks run at once in the caller (what a worker would do with them)."""
+    from fleet.celery import app
+
+    monkeypatch.setitem(app.conf, "task_always_eager", True)
+    monkeypatch.setitem(app.conf, "task_eager_propagates", True)
+
+
 @pytest.fixture(autouse=True)
 def fresh_channel_layer():
     """Give every test its own channel layer instance.

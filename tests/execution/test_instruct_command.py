@@ -8,19 +8,6 @@ from fleet.models import Instruction, Location
 pytestmark = [pytest.mark.timeout(60), pytest.mark.slow, pytest.mark.usefixtures("seeded_ontology")]
 
 
-@pytest.fixture
-def seeded_ontology(transactional_db):
-    """The interpreter's seed terms (a transactional test before this one flushed the migration's rows)."""
-    import importlib
-
-    from django.apps import apps
-
-    from interpreter import versions
-
-    importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
-    versions.bump_ontology()
-
-
 def test_instruct_wait_prints_transitions_and_outcome(turtle_world, fleet_admin, capsys):
     Location.objects.create(map=Location.objects.first().map, name="Dock", x=-1.6, y=-0.5)
     call_command("instruct", "move turtlebot to Dock", user=fleet_admin.username, wait=True)

@@ -16,15 +16,12 @@ def pose_stream():
     state = {}
 
     def run():
-        loop = asyncio.new_event_loop()
-        state["loop"] = loop
-        stop = asyncio.Event()
-        state["stop"] = stop
-        robots = list(Robot.objects.prefetch_related("bindings"))
-        try:
-            loop.run_until_complete(follow(robots, PoseHub(), stop))
-        finally:
-            loop.close()
+        with asyncio.Runner() as runner:  # which, closing, ends what still runs on its loop (keepalives)
+            state["loop"] = runner.get_loop()
+            stop = asyncio.Event()
+            state["stop"] = stop
+            robots = list(Robot.objects.prefetch_related("bindings"))
+            runner.run(follow(robots, PoseHub(), stop))
 
     thread = threading.Thread(target=run, name="poses", daemon=True)
     thread.start()

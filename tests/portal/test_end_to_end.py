@@ -18,14 +18,6 @@ NEAR_A = (
 )
 
 
-@pytest.fixture
-def eager_celery(monkeypatch):
-    from fleet.celery import app
-
-    monkeypatch.setitem(app.conf, "task_always_eager", True)
-    monkeypatch.setitem(app.conf, "task_eager_propagates", True)
-
-
 def test_register_instruct_watch_answer_and_stop(seeded_terms, login, fleet_admin, live_url, eager_celery):
     with demo_world() as world:
         page = login(fleet_admin)
