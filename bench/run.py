@@ -244,7 +244,8 @@ class Bench:
         )
         await driver.close()
         return result(
-            f"Experiment {table - 1}: through the portal",
+            f"Experiment {table - 2}: through the portal, "
+            + ("robot registered and identified by the portal" if identified else "robot registered by hand"),
             cells=grid.pop("cells"),
             notes=[grid["cap"]],
             **grid,
