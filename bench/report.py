@@ -6,10 +6,12 @@ An experiment result is a dict: {"title", "status": "ok"|"partial"|"skipped"|"er
 """
 
 import json
+import sys
 from pathlib import Path
 
 from bench import paper
 
+RUN_FILE = "run.json"  # the run's mode, when and how long, and its experiments in order
 SUMMARY_KEYS = (
     "command_latency_ms",
     "direct_latency_ms",
@@ -22,18 +24,30 @@ SUMMARY_KEYS = (
     "success_rate",
 )
 
-# (summary path, comparison, threshold, what the issue asks)
+# (summary path, comparison, threshold, what the issue asks, how our value reads)
 GOALS = (
-    (("command_latency_ms", "1", "p99"), "<=", 20, "command to robot p99 ≤ 20 ms, 1 robot"),
-    (("command_latency_ms", "100", "p99"), "<=", 50, "command to robot p99 ≤ 50 ms, 100 moving"),
-    (("stop_latency_ms", "p99"), "<=", 20, "stop p99 ≤ 20 ms with 100 instructions queued"),
-    (("registration_s", "100"), "<=", 5, "100 robots registered in ≤ 5 s"),
-    (("identification_ms_1200_topics",), "<=", 100, "identification of a 1,200-topic robot ≤ 100 ms"),
-    (("interpreter_per_s",), ">=", 2000, "interpreter ≥ 2,000 instructions/s"),
-    (("sim_realtime_robots",), ">=", 500, "simulator ≥ 500 robots at real time"),
-    (("live_staleness_ms", "p99"), "<=", 200, "live staleness p99 ≤ 200 ms, 200 robots, 10 clients"),
-    (("success_rate", "no_nav"), ">=", 0.99, "success rate ≥ 99 % without navigation"),
-    (("success_rate", "nav"), ">=", 0.99, "success rate ≥ 99 % with navigation"),
+    (("command_latency_ms", "1", "p99"), "<=", 20, "command to robot p99 ≤ 20 ms, 1 robot", "{:.1f} ms"),
+    (("command_latency_ms", "100", "p99"), "<=", 50, "command to robot p99 ≤ 50 ms, 100 moving", "{:.1f} ms"),
+    (("stop_latency_ms", "p99"), "<=", 20, "stop p99 ≤ 20 ms with 100 instructions queued", "{:.1f} ms"),
+    (("registration_s", "100"), "<=", 5, "100 robots registered in ≤ 5 s", "{:.2f} s"),
+    (
+        ("identification_ms_1200_topics",),
+        "<=",
+        100,
+        "identification of a 1,200-topic robot ≤ 100 ms",
+        "{:.2f} ms",
+    ),
+    (("interpreter_per_s",), ">=", 2000, "interpreter ≥ 2,000 instructions/s", "{:,.0f} /s"),
+    (("sim_realtime_robots",), ">=", 500, "simulator ≥ 500 robots at real time", "{:,.0f} robots"),
+    (
+        ("live_staleness_ms", "p99"),
+        "<=",
+        200,
+        "live staleness p99 ≤ 200 ms, 200 robots, 10 clients",
+        "{:.1f} ms",
+    ),
+    (("success_rate", "no_nav"), ">=", 0.99, "success rate ≥ 99 % without navigation", "{:.3f}"),
+    (("success_rate", "nav"), ">=", 0.99, "success rate ≥ 99 % with navigation", "{:.3f}"),
 )
 
 
@@ -77,13 +91,14 @@ def lookup(summary: dict, path: tuple[str, ...]):
 def goal_rows(summary: dict) -> list[dict]:
     """Each goal with our value and met / missed / not measured."""
     rows = []
-    for path, op, limit, text in GOALS:
+    for path, op, limit, text, reads in GOALS:
         value = lookup(summary, path)
         if value is None:
-            verdict = "not measured"
+            verdict, shown = "not measured", "–"
         else:
             verdict = "met" if (value <= limit if op == "<=" else value >= limit) else "MISSED"
-        rows.append({"goal": text, "key": ".".join(path), "value": value, "verdict": verdict})
+            shown = reads.format(value)
+        rows.append({"goal": text, "key": ".".join(path), "value": value, "shown": shown, "verdict": verdict})
     return rows
 
 
@@ -102,11 +117,22 @@ def write_all(results: dict[str, dict], out_dir: Path, mode: str, meta: dict | N
     out_dir.mkdir(parents=True, exist_ok=True)
     for name, result in results.items():
         (out_dir / f"{name}.json").write_text(json.dumps(result, indent=1, default=str) + "\n")
+    run = {"mode": mode, "meta": meta or {}, "experiments": list(results)}
+    (out_dir / RUN_FILE).write_text(json.dumps(run, indent=1) + "\n")
+    return render_all(out_dir)
+
+
+def render_all(out_dir: Path) -> dict:
+    """summary.json, the plots and REPORT.md from the run's JSON files in out_dir; return the summary.
+
+    `python -m bench.report DIR` does this alone: a report renderer change needs no new run.
+    """
+    run = json.loads((out_dir / RUN_FILE).read_text())
+    results = {name: json.loads((out_dir / f"{name}.json").read_text()) for name in run["experiments"]}
     summary = build_summary(results)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     plots = write_plots(results, out_dir)
-    text = render_markdown(results, summary, mode, plots, meta or {})
-    (out_dir / "REPORT.md").write_text(text)
+    (out_dir / "REPORT.md").write_text(render_markdown(results, summary, run["mode"], plots, run["meta"]))
     return summary
 
 
@@ -122,7 +148,7 @@ def render_headline(summary: dict) -> str:
     """The headline table (goals and our numbers), for REPORT.md and the README."""
     lines = ["| goal | ours | verdict |", "|---|---|---|"]
     for row in goal_rows(summary):
-        lines.append(f"| {row['goal']} | {_fmt(row['value'])} | {row['verdict']} |")
+        lines.append(f"| {row['goal']} | {row['shown']} | {row['verdict']} |")
     return "\n".join(lines)
 
 
@@ -270,3 +296,11 @@ def _table_figure(plt, table: paper.PaperTable, ours: dict):
     ax.legend()
     fig.tight_layout()
     return fig
+
+
+if __name__ == "__main__":
+    print(
+        render_headline(
+            render_all(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parent / "results")
+        )
+    )

@@ -1,6 +1,8 @@
 """The report generator on a tiny made-up run: summary shape, side-by-side tables, plots, goal verdicts."""
 
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -78,6 +80,26 @@ def test_goal_verdicts_say_met_missed_or_not_measured(tmp_path):
     assert verdicts["sim_realtime_robots"] == "not measured"
     summary["sim_realtime_robots"] = 800
     assert {r["key"]: r["verdict"] for r in report.goal_rows(summary)}["sim_realtime_robots"] == "met"
+
+
+def test_goals_read_with_their_units(tmp_path):
+    report.write_all(TINY, tmp_path, "quick")
+    text = (tmp_path / "REPORT.md").read_text()
+    assert "| interpreter ≥ 2,000 instructions/s | 1,500 /s | MISSED |" in text
+    assert "| simulator ≥ 500 robots at real time | – | not measured |" in text
+
+
+def test_the_report_is_rendered_again_from_the_files_alone(tmp_path):
+    """`python -m bench.report DIR`: a renderer change re-renders a stored run, in its order, without running it."""
+    report.write_all(TINY, tmp_path, "quick", {"seconds": 12})
+    first = (tmp_path / "REPORT.md").read_text()
+    (tmp_path / "REPORT.md").unlink()
+    proc = subprocess.run(
+        [sys.executable, "-m", "bench.report", str(tmp_path)], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "REPORT.md").read_text() == first
+    assert "Run: seconds 12" in first and first.index("exp1_direct:") < first.index("interp:")
 
 
 def test_a_report_table_has_the_papers_rows_and_columns():
