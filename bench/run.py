@@ -216,10 +216,6 @@ class Bench:
 
     async def portal_driver(self, links) -> PortalDriver:
         """The portal's teleop over /ws/fleet/, robots registered by hand (no identification)."""
-        try:
-            import fleet.control  # noqa: F401 - the consumer needs it to publish
-        except ImportError as exc:
-            raise Unavailable("fleet.control (execution: teleop/stop publishing) does not exist yet") from exc
         import websockets
 
         ids = await asyncio.to_thread(hand_register, links)
@@ -439,10 +435,8 @@ def _namespace(link) -> str:
 
 
 def auto_register(urls: list[str]):
-    try:
-        from robots.registration import register_endpoints
-    except ImportError as exc:
-        raise Unavailable("robots.registration.register_endpoints does not exist yet") from exc
+    from robots.registration import register_endpoints
+
     return register_endpoints(urls)
 
 
@@ -451,9 +445,6 @@ def run_components(mode: str, timeout: int, env: dict, out_dir: Path) -> dict[st
     out = {}
     for name, (filename, keys) in COMPONENTS.items():
         title = f"component bench bench/{name}.py"
-        if not (RESULTS.parent / f"{name}.py").exists():
-            out[f"component_{name}"] = result(title, "skipped", reason=f"bench/{name}.py does not exist yet")
-            continue
         print(f"[bench] {name} ...", flush=True)
         try:
             proc = subprocess.run(

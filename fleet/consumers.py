@@ -38,10 +38,8 @@ def _number(content: dict, field: str) -> float:
 
 
 def _control():
-    try:
-        from fleet import control
-    except ImportError as exc:
-        raise CommandError("robot control is not available on this server yet") from exc
+    from fleet import control  # looked up at each call (the tests put a recorder in its place)
+
     return control
 
 
@@ -56,7 +54,6 @@ def _call(action, *args):
 
 def command_stop(user, content: dict) -> str:
     """Stop the robots named (or all), held by someone else or not: a stop always gets through."""
-    from fleet.roles import can_control
     from robots.models import Robot
 
     if not can_control(user):
