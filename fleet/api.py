@@ -34,14 +34,11 @@ api = NinjaAPI(
 
 def _mount_routers():
     from fleet.api_routes import router as fleet_router
+    from interpreter.api import router as interpreter_router
     from robots.api import router as robots_router
 
     api.add_router("/", fleet_router)
     api.add_router("/robots", robots_router)
-    try:
-        from interpreter.api import router as interpreter_router
-    except ImportError:
-        return
     api.add_router("/interpreter", interpreter_router)
 
 

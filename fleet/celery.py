@@ -15,8 +15,6 @@ app.autodiscover_tasks()
 @worker_process_init.connect
 def load_heavy_state(**_kwargs):
     """Load the ontology once per worker process, never at import time."""
-    try:
-        from interpreter.service import warm_up
-    except ImportError:  # the interpreter app is optional for a sim-only worker
-        return
+    from interpreter.service import warm_up
+
     warm_up()

@@ -241,11 +241,9 @@ def mark_missing(url: str, namespaces: set[str]) -> list[str]:
 # ----- vocabulary and world -----
 def load_vocabulary() -> identify.Vocabulary:
     """The paper's keywords, replaced per action by TopicKeyword rows; ontology synonyms added."""
+    from interpreter.models import Synonym, TopicKeyword
+
     vocab = identify.Vocabulary()
-    try:
-        from interpreter.models import Synonym, TopicKeyword
-    except ImportError:
-        return vocab
     try:
         rows = list(TopicKeyword.objects.values_list("action", "keyword", "weight"))
         synonyms = list(

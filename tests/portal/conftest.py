@@ -58,10 +58,8 @@ CHROMIUM_ARGS = [
 
 def _fresh_interpreter():
     """The server is a fresh process: forget robots and places an earlier test's database gave the interpreter."""
-    try:
-        from interpreter.service import store
-    except ImportError:
-        return
+    from interpreter.service import store
+
     store.cache_clear()
 
 
