@@ -6,6 +6,9 @@ One Ctrl-C stops them all; nothing is left running or listening.
 import os
 import subprocess
 import sys
+import threading
+import time
+import urllib.request
 from pathlib import Path
 
 from honcho.manager import Manager
@@ -23,8 +26,8 @@ def processes(python: str) -> dict[str, str]:
         "web": f"{python} -m uvicorn fleet.asgi:application --host {HOST} --port {PORT} --log-level warning",
         # Instructions block while robots move, so that worker runs many threads; stops and registrations
         # have a worker of their own and never wait behind a long instruction.
-        "worker": f"{python} -m celery -A fleet worker -n instructions@%h -Q instructions -P threads -c 32 -l warning",
-        "control": f"{python} -m celery -A fleet worker -n control@%h -Q control,registration -c 1 -l warning",
+        "worker": f"{python} -m celery -A fleet -q worker -n instructions@%h -Q instructions -P threads -c 32 -l warning",
+        "control": f"{python} -m celery -A fleet -q worker -n control@%h -Q control,registration -c 1 -l warning",
         "sim": f"{manage} simworker --world paper",
         "links": f"{manage} robotlinks --register-world paper",
         "scheduler": f"{manage} scheduler",  # time slots, lost workers, stalled robot queues (issue 6)
@@ -47,14 +50,36 @@ def main() -> int:
 
 def start_all(env: dict) -> int:
     python = sys.executable
-    for step in (["migrate", "--noinput", "-v", "0"], ["setup_demo"]):
-        subprocess.run([python, "manage.py", *step], cwd=BASE_DIR, env=env, check=True)
+    subprocess.run(
+        [python, "manage.py", "migrate", "--noinput", "-v", "0"], cwd=BASE_DIR, env=env, check=True
+    )
+    demo = subprocess.run(
+        [python, "manage.py", "setup_demo"], cwd=BASE_DIR, env=env, check=True, capture_output=True, text=True
+    )
+    print(demo.stdout, end="", flush=True)
+    login = next((line for line in demo.stdout.splitlines() if line.startswith("login:")), "")
     manager = Manager()
     for name, command in processes(python).items():
         manager.add_process(name, command, cwd=str(BASE_DIR), env=env)
-    print(f"\n  Fleet portal: http://{HOST}:{PORT}/  (Ctrl-C stops everything)\n", flush=True)
+    url = f"http://{HOST}:{PORT}/"
+    print(f"\n  Fleet portal: {url}  (starting; Ctrl-C stops everything)\n", flush=True)
+    threading.Thread(target=lambda: print(announcement(url, login), flush=True), daemon=True).start()
     manager.loop()
     return manager.returncode or 0
+
+
+def announcement(url: str, login: str, timeout: float = 60.0) -> str:
+    """Once the portal answers (or it has not within timeout): where to go and how to log in, said last."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with urllib.request.urlopen(f"{url}login/", timeout=2) as response:
+                if response.status == 200:
+                    return f"\n  Fleet portal ready: {url}\n  {login}\n  Ctrl-C stops everything.\n"
+        except OSError:
+            pass  # not listening yet
+        time.sleep(0.5)
+    return f"\n  The portal did not answer at {url} within {timeout:.0f} s: see the web lines above.\n"
 
 
 if __name__ == "__main__":
