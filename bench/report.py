@@ -298,9 +298,16 @@ def _table_figure(plt, table: paper.PaperTable, ours: dict):
     return fig
 
 
-if __name__ == "__main__":
-    print(
-        render_headline(
-            render_all(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parent / "results")
+def main(argv: list[str]) -> int:
+    out_dir = Path(argv[0]) if argv else Path(__file__).parent / "results"
+    if not (out_dir / RUN_FILE).is_file():
+        print(
+            f"bench.report: {out_dir} holds no {RUN_FILE}: not a directory bench.run wrote", file=sys.stderr
         )
-    )
+        return 2
+    print(render_headline(render_all(out_dir)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

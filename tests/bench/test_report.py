@@ -102,6 +102,16 @@ def test_the_report_is_rendered_again_from_the_files_alone(tmp_path):
     assert "Run: seconds 12" in first and first.index("exp1_direct:") < first.index("interp:")
 
 
+def test_rendering_a_directory_no_run_wrote_is_refused_in_words(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    proc = subprocess.run(
+        [sys.executable, "-m", "bench.report", str(tmp_path)], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 2
+    assert f"{tmp_path} holds no run.json" in proc.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]  # nothing written there
+
+
 def test_a_report_table_has_the_papers_rows_and_columns():
     text = report.render_table(report.paper.TABLE_13, {})
     body = [line for line in text.splitlines() if line.startswith("| ") and "/" in line]
