@@ -33,6 +33,10 @@ async function forSelected(action) {
     toast(reply.status === "fulfilled" ? reply.value.detail : `${robots[i].name}: ${reply.reason.message}`, reply.status !== "fulfilled");
   });
 }
+const filter = document.getElementById("robot-filter");
+if (filter) filter.addEventListener("input", () => table.filter(filter.value));
+const pickAll = document.getElementById("pick-all");
+if (pickAll) pickAll.addEventListener("change", () => table.selectAll(pickAll.checked));
 document.querySelectorAll("button[data-selected]").forEach((button) => button.addEventListener("click", () => forSelected(button.dataset.selected)));
 
 const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, sendSelected) : null;

@@ -5,6 +5,43 @@ export class RobotTable {
   constructor(tbody) {
     this.tbody = tbody;
     this.robots = new Map();
+    this.query = "";
+    this.count = document.getElementById("robot-count");
+  }
+
+  // Show only the robots whose name, model, state or holder contains the text (case-insensitive).
+  filter(text) {
+    this.query = text.trim().toLowerCase();
+    for (const tr of this.tbody.querySelectorAll("tr[data-robot-id]")) this.applyFilter(tr);
+    this.showCount();
+  }
+
+  matches(robot) {
+    if (!this.query) return true;
+    return [robot.name, robot.model, robot.state, robot.holder].some((value) => (value || "").toLowerCase().includes(this.query));
+  }
+
+  applyFilter(tr) {
+    const robot = this.robots.get(Number(tr.dataset.robotId));
+    tr.hidden = Boolean(robot) && !this.matches(robot);
+    if (tr.hidden) {
+      const box = tr.querySelector("input.pick");
+      if (box && box.checked) { box.checked = false; tr.classList.remove("selected"); } // never act on what is not shown
+    }
+  }
+
+  showCount() {
+    if (!this.count) return;
+    const shown = [...this.robots.values()].filter((robot) => this.matches(robot)).length;
+    this.count.textContent = this.query ? `${shown} of ${this.robots.size} shown` : `${this.robots.size} robots`;
+  }
+
+  // Tick or clear every robot shown.
+  selectAll(checked) {
+    for (const tr of this.tbody.querySelectorAll("tr[data-robot-id]:not([hidden])")) {
+      const box = tr.querySelector("input.pick");
+      if (box) { box.checked = checked; tr.classList.toggle("selected", checked); }
+    }
   }
 
   selected() {
@@ -20,6 +57,7 @@ export class RobotTable {
       tr.innerHTML = '<td colspan="7">No robots registered yet.</td>';
       this.tbody.append(tr);
     }
+    this.showCount();
   }
 
   update(id, changes) {
@@ -46,6 +84,8 @@ export class RobotTable {
     tr.dataset.robotId = robot.id;
     tr.dataset.name = robot.name;
     tr.dataset.state = robot.state;
+    tr.hidden = !this.matches(robot);
+    picked = picked && !tr.hidden; // never act on what is not shown
     if (picked) tr.classList.add("selected");
     const cell = (className, ...children) => {
       const td = document.createElement("td");

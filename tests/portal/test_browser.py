@@ -98,6 +98,25 @@ def test_robot_list_takes_stops_and_releases_the_selected_robots(
     assert leases.holder(turtlebot) is None and leases.holder(husky) == second_operator
 
 
+def test_filter_and_select_all_shown_act_on_the_robots_in_view_only(login, operator, fleet, live_url):
+    page = login(operator)
+    page.goto(f"{live_url}/robots/")
+    _live(page)
+    page.wait_for_selector("#robot-count:has-text('2 robots')")
+    page.get_by_label("Filter").fill("HUS")  # any case; name, model, state or holder
+    page.wait_for_selector("#robot-count:has-text('1 of 2 shown')")
+    assert page.locator("#robot-table tr[data-name=turtlebot]").is_hidden()
+    page.get_by_label("Select all robots shown").check()
+    page.get_by_role("button", name="Take control").click()
+    page.wait_for_selector("#robot-table tr[data-name=husky] .held:has-text('held by otto')")
+    assert leases.holder(fleet["turtlebot"]) is None  # the hidden robot was not acted on
+
+    page.get_by_label("Filter").fill("")
+    page.wait_for_selector("#robot-count:has-text('2 robots')")
+    assert page.locator("#robot-table tr[data-name=turtlebot]").is_visible()
+    assert not page.get_by_label("Select turtlebot").is_checked()
+
+
 def test_usable_on_a_768px_tablet(login, operator, fleet):
     page = login(operator, width=768, height=1024)
     _live(page)
