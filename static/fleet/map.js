@@ -4,6 +4,11 @@ import { STATE_COLOR, STATE_GLYPH } from "./api.js";
 
 const TRAIL_POINTS = 120;
 const PICK_RADIUS_M = 0.4;
+const MIN_DRAWN_M = 0.18; // small robots are drawn at least this big (metres) so they stay visible
+const DEFAULT_FOOTPRINT = [[0.2, 0], [-0.15, 0.15], [-0.15, -0.15]];
+// Labels are placed busy robots' first; one that would cover a label already placed is left out, so a map of
+// hundreds of robots stays readable (every robot is still drawn, over the labels, and listed in the table).
+const LABEL_RANK = { motion: 3, work: 3, dialog: 3, ready: 2, registered: 1 };
 
 export class FleetMap {
   constructor(canvas, mapData, onPick) {
@@ -116,7 +121,19 @@ export class FleetMap {
     this.locations.forEach((spot) => this.drawLocation(context, spot));
     this.robots.forEach((robot) => this.drawTrail(context, robot));
     this.robots.forEach((robot) => this.drawGoal(context, robot));
+    const placed = [];
+    const byRank = [...this.robots.values()].sort((a, b) => (LABEL_RANK[b.state] || 0) - (LABEL_RANK[a.state] || 0));
+    this.labelled = byRank.filter((robot) => this.drawLabel(context, robot, placed)).map((robot) => robot.name);
     this.robots.forEach((robot) => this.drawRobot(context, robot));
+  }
+
+  footprint(robot) {
+    return robot.footprint && robot.footprint.length >= 3 ? robot.footprint : DEFAULT_FOOTPRINT;
+  }
+
+  // The robot's drawn radius in metres.
+  reach(robot) {
+    return Math.max(MIN_DRAWN_M, ...this.footprint(robot).map(([fx, fy]) => Math.hypot(fx, fy)));
   }
 
   font(size, weight = 600) { return `${weight} ${Math.round(size * this.ratio)}px system-ui, sans-serif`; }
@@ -177,11 +194,9 @@ export class FleetMap {
     if (!at) return;
     const [x, y, yaw] = at;
     const color = STATE_COLOR[robot.state] || "#546e7a";
-    const footprint = robot.footprint && robot.footprint.length >= 3
-      ? robot.footprint : [[0.2, 0], [-0.15, 0.15], [-0.15, -0.15]];
-    const minimum = 0.18; // draw small robots at least this big (metres) so they stay visible
+    const footprint = this.footprint(robot);
     const size = Math.max(...footprint.map(([fx, fy]) => Math.hypot(fx, fy)));
-    const grow = size < minimum ? minimum / size : 1;
+    const grow = this.reach(robot) / size;
     context.save();
     context.beginPath();
     footprint.forEach(([fx, fy], index) => {
@@ -204,14 +219,26 @@ export class FleetMap {
     const [cx, cy] = this.toScreen(x, y);
     const [hx, hy] = this.toScreen(x + Math.cos(yaw) * size * grow * 1.3, y + Math.sin(yaw) * size * grow * 1.3);
     context.beginPath(); context.moveTo(cx, cy); context.lineTo(hx, hy); context.stroke();
+    context.restore();
+  }
+
+  // The robot's name and state glyph above it, unless that would cover a label in placed; true if drawn.
+  drawLabel(context, robot, placed) {
+    const at = this.where(robot);
+    if (!at) return false;
+    const [cx, cy] = this.toScreen(at[0], at[1]);
+    const top = cy - this.reach(robot) * this.scale - 20 * this.ratio;
     const label = `${STATE_GLYPH[robot.state] || "•"} ${robot.name}`;
     context.font = this.font(12, 700);
     const width = context.measureText(label).width;
-    const top = cy - size * grow * this.scale - 20 * this.ratio;
+    const box = [cx - width / 2 - 3 * this.ratio, top, width + 6 * this.ratio, 16 * this.ratio];
+    const covers = ([x, y, w, h]) => box[0] < x + w && x < box[0] + box[2] && box[1] < y + h && y < box[1] + box[3];
+    if (placed.some(covers)) return false;
+    placed.push(box);
     context.fillStyle = "rgba(255,255,255,.88)";
-    context.fillRect(cx - width / 2 - 3 * this.ratio, top, width + 6 * this.ratio, 16 * this.ratio);
+    context.fillRect(...box);
     context.fillStyle = "#111";
     context.fillText(label, cx - width / 2, top + 12 * this.ratio);
-    context.restore();
+    return true;
   }
 }

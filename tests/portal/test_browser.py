@@ -117,6 +117,24 @@ def test_filter_and_select_all_shown_act_on_the_robots_in_view_only(login, opera
     assert not page.get_by_label("Select turtlebot").is_checked()
 
 
+LABELS = """(spots) => {
+  const map = window.fleet.map, m = map.map;
+  const [cx, cy] = [m.origin[0] + m.width * m.resolution / 2, m.origin[1] + m.height * m.resolution / 2];
+  map.setRobots(spots.map(([name, state, dx], id) => ({ id: 1000 + id, name, state, start_pose: [cx + dx, cy, 0] })));
+  map.draw();
+  return map.labelled;
+}"""
+
+
+def test_map_labels_that_would_cover_each_other_leave_the_busy_robots_named(login, operator, fleet):
+    page = login(operator)
+    _live(page)
+    crowded = [("idle1", "ready", 0.0), ("mover", "motion", 0.01), ("idle2", "registered", 0.02)]
+    assert page.evaluate(LABELS, crowded) == ["mover"]  # one place, one label: the robot under way
+    apart = [("left", "ready", -1.5), ("right", "ready", 1.5)]
+    assert sorted(page.evaluate(LABELS, apart)) == ["left", "right"]
+
+
 def test_usable_on_a_768px_tablet(login, operator, fleet):
     page = login(operator, width=768, height=1024)
     _live(page)
