@@ -38,12 +38,10 @@ def pose_stream():
 @contextmanager
 def demo_world():
     """The paper world running, its map and locations in the database; yields the world handle."""
-    import pytest
-
-    testing = pytest.importorskip("simworker.testing")
     from fleet.worlds import load_world_into_db
+    from simworker.testing import running_world
 
-    with testing.running_world("paper") as world:
+    with running_world("paper") as world:
         load_world_into_db("paper")
         yield world
 
