@@ -53,10 +53,13 @@ def start_all(env: dict) -> int:
     subprocess.run(
         [python, "manage.py", "migrate", "--noinput", "-v", "0"], cwd=BASE_DIR, env=env, check=True
     )
+    # its output is kept to say the login again later; its errors go straight to the terminal
     demo = subprocess.run(
-        [python, "manage.py", "setup_demo"], cwd=BASE_DIR, env=env, check=True, capture_output=True, text=True
+        [python, "manage.py", "setup_demo"], cwd=BASE_DIR, env=env, stdout=subprocess.PIPE, text=True
     )
     print(demo.stdout, end="", flush=True)
+    if demo.returncode:
+        return demo.returncode
     login = next((line for line in demo.stdout.splitlines() if line.startswith("login:")), "")
     manager = Manager()
     for name, command in processes(python).items():
