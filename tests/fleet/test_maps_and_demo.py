@@ -54,3 +54,13 @@ def test_table_12_slots_attach_to_registered_robots():
     assert not TimeSlot.objects.filter(
         enabled=True
     ).exists()  # demo slots start disabled (FLEET_DEMO_SCHEDULES)
+
+
+@pytest.mark.django_db
+def test_setup_demo_names_an_unknown_world_in_one_line_and_loads_nothing(settings, tmp_path):
+    settings.VAR_DIR = tmp_path  # the demo admin's password file goes here
+    with pytest.raises(
+        CommandError, match=r"world 'nowhere' \(--world or FLEET_WORLD\): .*cannot read world"
+    ):
+        call_command("setup_demo", world="nowhere")
+    assert not Map.objects.exists() and not Location.objects.exists()

@@ -4,7 +4,7 @@ import secrets
 
 from django.conf import settings
 from django.contrib.auth.models import Group, User
-from django.core.management.base import BaseCommand
+from django.core.management.base import BaseCommand, CommandError
 
 from fleet.roles import ADMIN, sync_groups
 
@@ -19,8 +19,12 @@ class Command(BaseCommand):
         sync_groups()
         password = self.ensure_admin()
         from fleet.worlds import load_world_into_db
+        from simworker.world import WorldFormatError
 
-        summary = load_world_into_db(world)
+        try:
+            summary = load_world_into_db(world)
+        except WorldFormatError as exc:
+            raise CommandError(f"world {world!r} (--world or FLEET_WORLD): {exc}") from exc
         self.stdout.write(f"demo world {world!r}: {summary}")
         self.stdout.write(self.style.SUCCESS(f"login: admin / {password}"))
 
