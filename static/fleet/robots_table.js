@@ -7,6 +7,16 @@ export class RobotTable {
     this.robots = new Map();
     this.query = "";
     this.count = document.getElementById("robot-count");
+    this.pickAll = document.getElementById("pick-all");
+  }
+
+  // The header box: ticked when every robot shown is, half-ticked when some are.
+  syncPickAll() {
+    if (!this.pickAll) return;
+    const boxes = [...this.tbody.querySelectorAll("tr[data-robot-id]:not([hidden]) input.pick")];
+    const ticked = boxes.filter((box) => box.checked).length;
+    this.pickAll.checked = boxes.length > 0 && ticked === boxes.length;
+    this.pickAll.indeterminate = ticked > 0 && ticked < boxes.length;
   }
 
   // Show only the robots whose name, model, state or holder contains the text (case-insensitive).
@@ -14,6 +24,7 @@ export class RobotTable {
     this.query = text.trim().toLowerCase();
     for (const tr of this.tbody.querySelectorAll("tr[data-robot-id]")) this.applyFilter(tr);
     this.showCount();
+    this.syncPickAll();
   }
 
   matches(robot) {
@@ -42,6 +53,7 @@ export class RobotTable {
       const box = tr.querySelector("input.pick");
       if (box) { box.checked = checked; tr.classList.toggle("selected", checked); }
     }
+    this.syncPickAll();
   }
 
   selected() {
@@ -58,6 +70,7 @@ export class RobotTable {
       this.tbody.append(tr);
     }
     this.showCount();
+    this.syncPickAll();
   }
 
   update(id, changes) {
@@ -67,6 +80,7 @@ export class RobotTable {
     const old = document.getElementById(`robot-${id}`);
     const picked = old && old.querySelector("input.pick:checked");
     if (old) old.replaceWith(this.row(robot, Boolean(picked)));
+    this.syncPickAll(); // a change of state or holder may take the robot out of the filter
     return robot;
   }
 
@@ -101,7 +115,7 @@ export class RobotTable {
       box.value = robot.id;
       box.checked = picked;
       box.setAttribute("aria-label", `Select ${robot.name}`);
-      box.addEventListener("change", () => tr.classList.toggle("selected", box.checked));
+      box.addEventListener("change", () => { tr.classList.toggle("selected", box.checked); this.syncPickAll(); });
       cell("", box);
     }
     const link = document.createElement("a");

@@ -115,6 +115,10 @@ def test_filter_and_select_all_shown_act_on_the_robots_in_view_only(login, opera
     page.wait_for_selector("#robot-count:has-text('2 robots')")
     assert page.locator("#robot-table tr[data-name=turtlebot]").is_visible()
     assert not page.get_by_label("Select turtlebot").is_checked()
+    pick_all = page.get_by_label("Select all robots shown")  # half-ticked: one of the two shown is
+    assert not pick_all.is_checked() and pick_all.evaluate("(box) => box.indeterminate")
+    page.get_by_label("Select turtlebot").check()
+    assert pick_all.is_checked() and not pick_all.evaluate("(box) => box.indeterminate")
 
 
 LABELS = """(spots) => {
