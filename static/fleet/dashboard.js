@@ -35,8 +35,7 @@ async function forSelected(action) {
 }
 const filter = document.getElementById("robot-filter");
 if (filter) filter.addEventListener("input", () => table.filter(filter.value));
-const pickAll = document.getElementById("pick-all");
-if (pickAll) pickAll.addEventListener("change", () => table.selectAll(pickAll.checked));
+if (table.pickAll) table.pickAll.addEventListener("change", () => table.selectAll(table.pickAll.checked));
 document.querySelectorAll("button[data-selected]").forEach((button) => button.addEventListener("click", () => forSelected(button.dataset.selected)));
 
 const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, sendSelected) : null;

@@ -79,8 +79,10 @@ export class RobotTable {
     Object.assign(robot, changes);
     const old = document.getElementById(`robot-${id}`);
     const picked = old && old.querySelector("input.pick:checked");
-    if (old) old.replaceWith(this.row(robot, Boolean(picked)));
-    this.syncPickAll(); // a change of state or holder may take the robot out of the filter
+    if (!old) return robot;
+    const fresh = this.row(robot, Boolean(picked));
+    old.replaceWith(fresh);
+    if (fresh.hidden !== old.hidden) this.syncPickAll(); // its new state or holder took it in or out of the filter
     return robot;
   }
 
