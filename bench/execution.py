@@ -1,8 +1,8 @@
-"""Experiments that need the execution engine (Celery tasks, fleet.control): 5, 6, 7 and stop with a queue.
+"""Experiments that need the execution engine (Celery tasks, execution.control): 5, 6, 7 and stop with a queue.
 
 They run against a second, small simulated world (the paper's robots, no extras) that may run faster than real
 time (`time_scale`), so the quick mode stays short; the move times reported are converted back to simulated
-(= real robot) seconds. Instructions go in through `fleet.instructions.submit` (what POST /api/instructions calls)
+(= real robot) seconds. Instructions go in through `execution.instructions.submit` (what POST /api/instructions calls)
 and are followed through the timestamps execution stores on each Instruction.
 
 "Without navigation" (Table 13) means the robot is registered without a navigation binding, so the execution
@@ -50,7 +50,7 @@ def limit_s(bench, metres: float, speed: float) -> float:
 
 async def wait_final(pk: int, timeout: float, clock=time.time):
     """Poll until the instruction is final or `timeout` has passed on `clock` (wall time by default)."""
-    from fleet.models import Instruction
+    from execution.models import Instruction
 
     deadline = clock() + timeout
     while True:
@@ -71,7 +71,7 @@ async def submit_and_wait(
     bench, text: str, timeout: float, parse: dict | None = None, bail: bool = True, clock=time.time
 ) -> dict:
     """Submit as the bench user and wait for a final status; return the instruction's timings."""
-    from fleet.instructions import submit
+    from execution.instructions import submit
 
     instruction = await asyncio.to_thread(submit, text, bench.portal.user, "api", parse)
     row = await wait_final(instruction.pk, timeout, clock)
@@ -183,7 +183,7 @@ def _result(title: str, cells: list, bench, **fields) -> dict:
 
 def route_length(name: str, start: tuple[float, float], goal: tuple[float, float]) -> float:
     """The length of the way around the map's walls (what the robot must drive), not the straight line."""
-    from fleet.execution.route import route
+    from execution.route import route
     from robots.models import Robot
 
     points = [start, *route(Robot.objects.get(name=name), start, goal)]
@@ -199,7 +199,7 @@ def trial_limit(bench, link, metres: float, nav: bool) -> float:
 
 async def _goal_trial(bench, link, verb: str, goal: tuple, nav: bool) -> bool:
     """One robot to one goal; a trial not finished within its limit fails and the robot is stopped."""
-    from fleet.control import stop
+    from execution.control import stop
 
     name, gx, gy, _task = goal
     x, y, _ = await asyncio.to_thread(bench.exec_sim.pose, link.name)
@@ -279,7 +279,7 @@ def success_why(rates: dict, outcomes: list[dict], time_scale: float) -> str:
 
 async def stop_queued(bench) -> dict:
     """Stop through the portal's WebSocket with ~100 instructions queued: stop issued -> zero Twist received."""
-    from fleet.models import Instruction
+    from execution.models import Instruction
 
     links = [bench.exec_link(n) for n in ("robot1", "robot2", "robot3", "robot4", "turtlebot")]
     await asyncio.to_thread(set_navigation, links, False)
@@ -327,14 +327,14 @@ async def stop_queued(bench) -> dict:
 
 
 def profile_stop(names: list[str], user) -> tuple[float, str]:
-    """cProfile fleet.control.stop (what the WebSocket stop runs) on idle robots, in this process."""
+    """cProfile execution.control.stop (what the WebSocket stop runs) on idle robots, in this process."""
     from bench.stats import profile_calls
-    from fleet.control import stop
+    from execution.control import stop
 
     per_call, body = profile_calls(lambda: stop(names, user, "bench"), 5)
     return (
         per_call,
-        f"fleet.control.stop of {len(names)} idle robots, 5 calls: {per_call:.1f} ms per call\n{body}",
+        f"execution.control.stop of {len(names)} idle robots, 5 calls: {per_call:.1f} ms per call\n{body}",
     )
 
 
@@ -342,7 +342,7 @@ def stop_why(stats: dict, per_call: float) -> str:
     return (
         f"stop p50 {stats['p50']} ms, p99 {stats['p99']} ms (goal p99 ≤ 20 ms). The WebSocket stop first raises "
         "the robots' stop flags (Redis) and publishes the zero Twist from the web process's event loop on its "
-        "own links (fleet/fast_stop.py), then runs fleet.control.stop in a thread (checks, a second zero, the "
+        "own links (fleet/fast_stop.py), then runs execution.control.stop in a thread (checks, a second zero, the "
         f"queued instructions cancelled, the audit row: about {per_call:.0f} ms on idle robots, profile below). "
         "A robot missing from the web process's stop targets (registered since their last load) or whose link "
         "is not up yet gets its zero from that second step only."
@@ -355,7 +355,7 @@ def _ms(t, t0):
 
 async def _queue(bench, links, count: int) -> list[int]:
     """Submit `count` one-leg instructions round-robin over the robots (most wait in the robots' queues)."""
-    from fleet.instructions import submit
+    from execution.instructions import submit
 
     pks = []
     for i in range(count):
@@ -371,7 +371,7 @@ async def _queue(bench, links, count: int) -> list[int]:
 
 
 async def _wait_running(pks, robots: int, timeout: float) -> None:
-    from fleet.models import Instruction
+    from execution.models import Instruction
 
     deadline = time.time() + timeout
     while time.time() < deadline:

@@ -15,7 +15,7 @@ from pathlib import Path
 from bench import component
 
 RESULT_FILE = "interpreter.json"
-TSV = Path(__file__).resolve().parents[2] / "shared" / "acceptance" / "instructions.tsv"
+TSV = Path(__file__).resolve().parents[1] / "tests" / "data" / "instructions.tsv"
 EXTRA = [
     "mvoe husy to the room 2 very fast",
     "move all turtlebots to (2, -1) slowly",
@@ -44,7 +44,7 @@ def setup_django() -> str:
 
 
 def add_fleet() -> None:
-    from fleet.models import Location, Map
+    from places.models import Location, Map
     from robots.models import Robot
 
     robots = [("turtlebot", "turtlebot3_burger"), ("husky", "husky"), ("tiago", "tiago")]

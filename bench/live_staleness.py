@@ -28,7 +28,7 @@ async def client(url: str, cookie: str, origin: str, samples: list[float], stop:
             now = time.time()
             frames += 1
             msg = json.loads(raw)
-            if msg.get("type") == "fleet.poses":
+            if msg.get("type") == "robots.poses":
                 samples.extend((now - p["t"]) * 1000 for p in msg.get("poses", []) if p.get("t"))
     return frames
 
@@ -49,12 +49,12 @@ async def measure(ws_url: str, cookie: str, origin: str, clients: int, seconds: 
 
 
 def feed() -> None:
-    """The pose feeder: every registered robot's odometry into fleet.poses (what `robotlinks` does)."""
+    """The pose feeder: every registered robot's odometry into robots.poses (what `robotlinks` does)."""
     import django
 
     django.setup()
-    from fleet.poses import PoseHub, follow
     from robots.models import Robot
+    from robots.poses import PoseHub, follow
 
     robots = list(Robot.objects.prefetch_related("bindings"))
     hub = PoseHub()

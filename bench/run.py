@@ -277,7 +277,7 @@ class Bench:
         stats = got["staleness_ms"]
         if not stats["n"]:
             raise Unavailable(
-                f"no pose reached the browsers ({got['errors'][:2] or 'no fleet.poses messages'})"
+                f"no pose reached the browsers ({got['errors'][:2] or 'no robots.poses messages'})"
             )
         return result(
             "Live staleness: simulator odometry -> browser WebSocket",
@@ -345,14 +345,14 @@ class Bench:
 
 
 def profile_teleop(name: str, user, calls: int = 200) -> tuple[float, str]:
-    """cProfile a press's checks (fleet.control.teleop_grant), what the portal runs once per press."""
+    """cProfile a press's checks (execution.control.teleop_grant), what the portal runs once per press."""
     from bench.stats import profile_calls
-    from fleet.control import teleop_grant
+    from execution.control import teleop_grant
 
     per_call, body = profile_calls(lambda: teleop_grant(name, user), calls)
     return (
         per_call,
-        f"fleet.control.teleop_grant, {calls} calls: {per_call:.2f} ms per call (under cProfile)\n{body}",
+        f"execution.control.teleop_grant, {calls} calls: {per_call:.2f} ms per call (under cProfile)\n{body}",
     )
 
 

@@ -35,8 +35,8 @@ def serve(n: int) -> None:
     """Child mode: run N extra robots, print the URL, then stats once a second until SIGTERM."""
     import signal
 
+    from fleetcore.world import load_world
     from simworker.fleet import SimFleet
-    from simworker.world import load_world
 
     world = load_world("paper")
     world.extra["spacing"] = 0.3 if n > 500 else 0.45

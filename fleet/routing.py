@@ -2,7 +2,7 @@
 
 from django.urls import path
 
-from fleet import consumers
+from portal import consumers
 
 websocket_urlpatterns = [
     path("ws/fleet/", consumers.FleetConsumer.as_asgi()),

@@ -38,9 +38,16 @@ INSTALLED_APPS = [
     "django.contrib.messages",
     "django.contrib.staticfiles",
     "channels",
+    # Project and domain apps, from the top layer down (docs/ARCHITECTURE.md; `make lint` checks the order).
     "fleet",
-    "robots",
+    "portal",
+    "experiments",
+    "execution",
     "interpreter",
+    "access",
+    "places",
+    "robots",
+    "audit",
     "simworker",
 ]
 
@@ -51,7 +58,7 @@ MIDDLEWARE = [
     "django.middleware.common.CommonMiddleware",
     "django.middleware.csrf.CsrfViewMiddleware",
     "django.contrib.auth.middleware.AuthenticationMiddleware",
-    "fleet.middleware.LoginRequired",
+    "portal.middleware.LoginRequired",
     "django.contrib.messages.middleware.MessageMiddleware",
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
 ]
@@ -69,7 +76,7 @@ TEMPLATES = [
                 "django.template.context_processors.request",
                 "django.contrib.auth.context_processors.auth",
                 "django.contrib.messages.context_processors.messages",
-                "fleet.roles.context_processor",
+                "access.roles.context_processor",
             ],
         },
     },
@@ -105,12 +112,12 @@ CELERY_TASK_ACKS_LATE = True
 CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
 CELERY_TASK_DEFAULT_QUEUE = "instructions"
-CELERY_IMPORTS = ["fleet.experiments"]  # tasks outside the apps' tasks.py modules
+CELERY_IMPORTS = ["experiments.runs"]  # tasks outside the apps' tasks.py modules
 CELERY_TASK_ROUTES = {
     "robots.tasks.*": {"queue": "registration"},
     "simworker.tasks.*": {"queue": "sim"},
-    "fleet.tasks.stop_*": {"queue": "control"},
-    "fleet.tasks.*": {"queue": "instructions"},
+    "execution.tasks.stop_*": {"queue": "control"},
+    "execution.tasks.*": {"queue": "instructions"},
 }
 CELERY_BROKER_TRANSPORT_OPTIONS = {"visibility_timeout": 3600}
 CELERY_BROKER_CONNECTION_RETRY_ON_STARTUP = True
@@ -141,7 +148,20 @@ LOGGING = {
     "formatters": {"short": {"format": "%(asctime)s %(levelname)s %(name)s: %(message)s"}},
     "handlers": {"console": {"class": "logging.StreamHandler", "formatter": "short"}},
     "root": {"handlers": ["console"], "level": "WARNING"},
-    "loggers": {name: {"level": "INFO"} for name in ("fleet", "robots", "interpreter", "simworker")},
+    "loggers": {
+        name: {"level": "INFO"}
+        for name in (
+            "fleet",
+            "portal",
+            "experiments",
+            "execution",
+            "interpreter",
+            "access",
+            "places",
+            "robots",
+            "simworker",
+        )
+    },
 }
 
 # The fleet's own knobs.

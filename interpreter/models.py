@@ -137,7 +137,7 @@ class Lesson(models.Model):
     word = models.CharField(max_length=60)
     meaning = models.CharField(max_length=100, blank=True)
     instruction = models.ForeignKey(
-        "fleet.Instruction", null=True, blank=True, on_delete=models.SET_NULL, related_name="lessons"
+        "execution.Instruction", null=True, blank=True, on_delete=models.SET_NULL, related_name="lessons"
     )
 
     class Meta:

@@ -68,7 +68,7 @@ def _load_terms() -> Terms:
 
 def load_fleet(version: str = "0") -> Fleet:
     """Read robot names, kinds and named locations from the database."""
-    from fleet.models import Location
+    from places.models import Location
     from robots.models import Robot
 
     robots = [RobotInfo(*row) for row in Robot.objects.values_list("name", "model", "drive")]
@@ -191,7 +191,7 @@ def _teach_location(answer: Answer, grammar: Grammar) -> str:
 
 
 def _create_location(name: str, x: float, y: float, like: str | None = None) -> None:
-    from fleet.models import Location, Map
+    from places.models import Location, Map
 
     model = Location.objects.filter(name=like).first() if like else None
     the_map = model.map if model else Map.objects.order_by("-created_at").first()
@@ -220,8 +220,8 @@ _TEACHERS = {
 
 
 def _record_lesson(text: str, answer: Answer, meaning: str, user, instruction):
-    from fleet import audit
-    from fleet.models import Instruction
+    from audit import records as audit
+    from execution.models import Instruction
     from interpreter.models import Lesson
 
     if instruction is not None and not isinstance(instruction, Instruction):

@@ -12,7 +12,7 @@ _TERM_MODELS = (
     "interpreter.Synonym",
     "interpreter.TopicKeyword",
 )
-_FLEET_MODELS = ("robots.Robot", "fleet.Location")
+_FLEET_MODELS = ("robots.Robot", "places.Location")
 
 
 def _on_term_change(sender, **kwargs):

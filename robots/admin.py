@@ -1,6 +1,6 @@
 from django.contrib import admin
 
-from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic
+from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, StateTransition, Topic
 
 
 class BindingInline(admin.TabularInline):
@@ -65,3 +65,9 @@ class BindingAdmin(admin.ModelAdmin):
 class RegistrationRecordAdmin(admin.ModelAdmin):
     list_display = ("endpoint", "started_at", "finished_at", "ok", "user")
     list_filter = ("ok",)
+
+
+@admin.register(StateTransition)
+class StateTransitionAdmin(admin.ModelAdmin):
+    list_display = ("robot", "from_state", "to_state", "at", "instruction", "reason")
+    list_filter = ("robot", "to_state")

@@ -2,7 +2,7 @@
 
 from ninja.errors import HttpError
 
-from fleet import audit
+from audit import records as audit
 from robots.models import Binding, Robot
 
 

@@ -3,7 +3,7 @@
 Each link is a reconnecting RosbridgeClient (backoff 0.1 s doubling to 1.6 s, WebSocket pings every second),
 so a restarted endpoint is back within about 2 s and every subscription made on the link is renewed by the
 client itself. A change of link state is written to the endpoint's robots (link_status, last_seen) and pushed
-through fleet.live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT seconds.
+through live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT seconds.
 
 Extending: pass `hooks` to LinkManager; each hook is `async hook(client, robots)` and runs once when a link is
 created (robots: [{id, name, namespace, bindings: {action: (target, type)}}]). Subscriptions a hook makes
@@ -21,7 +21,7 @@ from asgiref.sync import sync_to_async
 from django.db import close_old_connections
 from django.utils import timezone
 
-from fleet import live
+import live
 from robots.models import Robot
 from robots.rosbridge import RosbridgeClient
 
@@ -65,8 +65,8 @@ def set_link_status(url: str, up: bool) -> list[str]:
 
 def follow_link_in_state_machine(url: str, up: bool) -> None:
     """A link that comes up makes a registered or offline robot ready; a link that drops makes it offline."""
-    from fleet.execution.states import transition
-    from fleet.statemachine import Event
+    from fleetcore.states import Event
+    from robots.states import transition
 
     waiting = [Robot.State.REGISTERED, Robot.State.OFFLINE]
     robots = Robot.objects.filter(endpoint=url)

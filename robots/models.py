@@ -194,3 +194,21 @@ class RegistrationRecord(models.Model):
 
     def __str__(self):
         return f"{self.endpoint} at {self.started_at:%Y-%m-%d %H:%M:%S}"
+
+
+class StateTransition(models.Model):
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="transitions")
+    from_state = models.CharField(max_length=12, choices=Robot.State.choices)
+    to_state = models.CharField(max_length=12, choices=Robot.State.choices)
+    at = models.DateTimeField(default=timezone.now)
+    instruction = models.ForeignKey(
+        "execution.Instruction", null=True, blank=True, on_delete=models.SET_NULL, related_name="transitions"
+    )
+    reason = models.CharField(max_length=255, blank=True)
+
+    class Meta:
+        ordering = ["-at"]
+        indexes = [models.Index(fields=["robot", "-at"]), models.Index(fields=["instruction", "at"])]
+
+    def __str__(self):
+        return f"{self.robot}: {self.from_state} -> {self.to_state}"

@@ -16,7 +16,7 @@ from django.conf import settings
 from django.db import DatabaseError, transaction
 from django.utils import timezone
 
-from fleet import audit
+from audit import records as audit
 from robots import identify, kinematics
 from robots.discovery import Graph, discover
 from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic
@@ -262,15 +262,15 @@ def load_vocabulary() -> identify.Vocabulary:
 
 def attach_world_schedules() -> int:
     """Attach the current world's time slots to robots now registered, if its map is loaded."""
-    from fleet.models import Map
-    from fleet.worlds import load_schedules
+    from places.models import Map
+    from places.worlds import load_schedules
 
     name = getattr(settings, "FLEET_WORLD", "")
     map_row = Map.objects.filter(name=name).first() if name else None
     if map_row is None:
         return 0
     try:
-        from simworker.world import WorldFormatError, load_world
+        from fleetcore.world import WorldFormatError, load_world
 
         world = load_world(name)
     except (ImportError, OSError, ValueError, WorldFormatError) as exc:

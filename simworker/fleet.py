@@ -9,15 +9,15 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-from fleet.planning import Planner
+from fleetcore.catalog import model
+from fleetcore.planning import Planner
+from fleetcore.world import World, load_world
 from simworker import rosapi
 from simworker.graph import Graph
-from simworker.models_catalog import model
 from simworker.navstack import MoveBase, Nav2
 from simworker.physics import DEFAULT_DT, Physics
 from simworker.robot import SimRobot
 from simworker.server import RosbridgeServer
-from simworker.world import World, load_world
 
 log = logging.getLogger("simworker.fleet")
 

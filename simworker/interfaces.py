@@ -6,7 +6,7 @@ namespace (e.g. `/robot1`), as a namespaced launch would.
 
 from __future__ import annotations
 
-from simworker.models_catalog import Interface, ModelProfile, urdf
+from fleetcore.catalog import Interface, ModelProfile, urdf
 
 ROS1 = {
     "twist": "geometry_msgs/Twist",

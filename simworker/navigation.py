@@ -8,7 +8,7 @@ import itertools
 import math
 from collections.abc import Callable
 
-from fleet.planning import Planner
+from fleetcore.planning import Planner
 
 XY_TOLERANCE = 0.15
 YAW_TOLERANCE = 0.1

@@ -6,7 +6,7 @@ import json
 import math
 import time
 
-from fleet.planning import Planner
+from fleetcore.planning import Planner
 from simworker.graph import ServiceError
 from simworker.navigation import ABORTED, ACTIVE, PREEMPTED, SUCCEEDED, Navigator
 from simworker.robot import SimRobot, number, yaw_of

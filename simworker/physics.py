@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import pymunk
 
-from fleet.mapfile import OCCUPIED, OccupancyGrid
-from simworker.models_catalog import Laser, ModelProfile
+from fleetcore.catalog import Laser, ModelProfile
+from fleetcore.mapfile import OCCUPIED, OccupancyGrid
 
 DEFAULT_DT = 1.0 / 50.0
 WALL_CATEGORY = 0b01

@@ -6,12 +6,12 @@ import json
 import math
 from collections.abc import Callable
 
+from fleetcore.catalog import ModelProfile
+from fleetcore.world import RobotSpec
 from simworker.graph import Graph
 from simworker.interfaces import build_interface
-from simworker.models_catalog import ModelProfile
 from simworker.physics import Physics, RobotBody
 from simworker.server import RosbridgeServer
-from simworker.world import RobotSpec
 
 MUX_TIMEOUT = 0.5  # twist_mux input timeout (s)
 ZEROS36 = "[" + ",".join(["0.0"] * 36) + "]"

@@ -3,7 +3,7 @@
 import pytest
 from django.contrib.auth.models import Group, User
 
-from fleet.roles import ADMIN, OPERATOR, VIEWER, sync_groups
+from access.roles import ADMIN, OPERATOR, VIEWER, sync_groups
 
 PASSWORD = "correct-horse-battery"
 

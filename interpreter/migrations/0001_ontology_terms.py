@@ -12,7 +12,7 @@ class Migration(migrations.Migration):
     initial = True
 
     dependencies = [
-        ('fleet', '0001_initial'),
+        ('execution', '0001_initial'),
         migrations.swappable_dependency(settings.AUTH_USER_MODEL),
     ]
 
@@ -77,7 +77,7 @@ class Migration(migrations.Migration):
                 ('kind', models.CharField(choices=[('synonym', 'Synonym'), ('not_a_place', 'Not A Place'), ('location', 'Location'), ('forget', 'Forget')], max_length=12)),
                 ('word', models.CharField(max_length=60)),
                 ('meaning', models.CharField(blank=True, max_length=100)),
-                ('instruction', models.ForeignKey(blank=True, null=True, on_delete=django.db.models.deletion.SET_NULL, related_name='lessons', to='fleet.instruction')),
+                ('instruction', models.ForeignKey(blank=True, null=True, on_delete=django.db.models.deletion.SET_NULL, related_name='lessons', to='execution.instruction')),
                 ('taught_by', models.ForeignKey(blank=True, null=True, on_delete=django.db.models.deletion.SET_NULL, to=settings.AUTH_USER_MODEL)),
             ],
             options={

@@ -2,8 +2,8 @@
 
 import pytest
 
-from fleet.experiments import ExperimentError, robot_link, start_run
-from fleet.models import ExperimentRun
+from experiments.models import ExperimentRun
+from experiments.runs import ExperimentError, robot_link, start_run
 from robots.models import Binding, Robot
 
 
@@ -51,7 +51,7 @@ def test_the_page_lists_runs_and_a_viewer_cannot_start_one(client_for, viewer, r
     start_run("response", [robot], operator, {"trials": 1}, confirmed=True)
     from django.test import RequestFactory
 
-    from fleet.views_experiments import experiments
+    from portal.views_experiments import experiments
 
     request = RequestFactory().post(
         "/experiments/", {"kind": "response", "robots": [robot.pk], "confirm": "yes"}

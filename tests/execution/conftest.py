@@ -29,10 +29,10 @@ def exec_settings(settings):
 
 def register(sim, keys):
     """Register the world's endpoints in the test database; start poses from the world where none was found."""
-    from fleet.worlds import load_world_into_db
+    from fleetcore.world import load_world
+    from places.worlds import load_world_into_db
     from robots.models import Robot
     from robots.registration import register_endpoints
-    from simworker.world import load_world
 
     results = register_endpoints([sim.urls[key] for key in keys])
     assert all(result.ok for result in results), [getattr(r, "error", r) for r in results]
@@ -66,7 +66,7 @@ def demo_world(exec_settings, transactional_db):
 @pytest.fixture
 def table12_world(exec_settings, transactional_db):
     """Turtlebot, husky and tiago registered, with the paper's Table 12 time slots enabled."""
-    from fleet.models import TimeSlot
+    from execution.models import TimeSlot
 
     with running_world("paper", endpoints=["turtlebot", "husky", "tiago"]) as sim:
         sim.robots = register(sim, ["turtlebot", "husky", "tiago"])

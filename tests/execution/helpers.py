@@ -2,7 +2,8 @@
 
 import time
 
-from fleet.models import Instruction, StateTransition
+from execution.models import Instruction
+from robots.models import StateTransition
 
 
 def step(robots, x=None, y=None, name="P", task=None, speed="very fast", action="move"):

@@ -5,8 +5,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from fleet import motion
-from fleet.execution.steps import Blocked, StepFailed, drive
+from execution.steps import Blocked, StepFailed, drive
+from fleetcore import motion
 
 
 class StuckSession:

@@ -2,9 +2,9 @@
 
 import pytest
 
-from fleet.control import stop, teleop
-from fleet.leases import ControlRefused, take
-from fleet.models import AuditEntry
+from access.leases import ControlRefused, take
+from audit.models import AuditEntry
+from execution.control import stop, teleop
 from tests.execution.helpers import wait_for
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]

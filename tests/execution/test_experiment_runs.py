@@ -3,7 +3,7 @@
 import pytest
 from django.urls import reverse
 
-from fleet.models import ExperimentRun
+from experiments.models import ExperimentRun
 
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow, pytest.mark.usefixtures("eager_celery")]
 

@@ -6,8 +6,9 @@ import threading
 
 import pytest
 
-from fleet.instructions import submit
-from fleet.models import Execution, Location, TimeSlot
+from execution.instructions import submit
+from execution.models import Execution, TimeSlot
+from places.models import Location
 from robots.models import Robot
 from tests.execution.helpers import parse, step, wait_final
 

@@ -3,7 +3,8 @@
 import pytest
 from django.core.management import CommandError, call_command
 
-from fleet.models import Instruction, Location
+from execution.models import Instruction
+from places.models import Location
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.slow, pytest.mark.usefixtures("seeded_ontology")]
 

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleet import motion
-from fleet.motion import GoToGoal, Limits, Rotate
+from fleetcore import motion
+from fleetcore.motion import GoToGoal, Limits, Rotate
 
 TB3 = Limits(0.22, 2.84)
 

@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from fleet.instructions import submit
-from fleet.models import Execution, Instruction
+from execution.instructions import submit
+from execution.models import Execution, Instruction
 from tests.execution.helpers import parse, step, transitions, wait_final, wait_for
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]

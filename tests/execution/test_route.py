@@ -4,13 +4,13 @@ import math
 
 import pytest
 
-from fleet.execution.route import footprint_radius, route
-from fleet.instructions import submit
-from fleet.worlds import load_world_into_db
+from execution.instructions import submit
+from execution.route import footprint_radius, route
+from places.worlds import load_world_into_db
 from robots.models import Robot
 from tests.execution.helpers import parse, step, wait_final
 
-CRATE = ((1.4, 2.6), (0.1, 0.5))  # the paper world's crate (simworker/worlds/make_paper_map.py)
+CRATE = ((1.4, 2.6), (0.1, 0.5))  # the paper world's crate (fleetcore/worlds/make_paper_map.py)
 START, BEHIND_CRATE = (-2.0, -0.5), (3.0, 0.8)  # the straight line between clips the crate
 
 
@@ -74,7 +74,7 @@ BIG_SQUARE = [[-0.3, -0.3], [-0.3, 0.3], [0.3, 0.3], [0.3, -0.3]]
 def test_route_goes_around_a_robot_parked_on_the_way():
     from django.core.cache import cache
 
-    from fleet import live
+    import live
 
     load_world_into_db("paper")
     robot = Robot.objects.create(name="tb", endpoint="ws://x/1", footprint=SQUARE)
@@ -94,7 +94,7 @@ def test_route_goes_around_a_robot_parked_on_the_way():
 @pytest.mark.django_db
 def test_route_keeps_clear_of_where_a_robot_under_way_is_going(fleet_admin):
     """Table 12's last slot: TIAGo drives to I while robot1 goes from B to C, across I."""
-    from fleet.models import Execution, Instruction
+    from execution.models import Execution, Instruction
 
     load_world_into_db("paper")
     robot = Robot.objects.create(name="tb", endpoint="ws://x/1", footprint=SQUARE)

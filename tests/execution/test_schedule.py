@@ -6,11 +6,10 @@ import time
 import pytest
 from django.utils import timezone
 
-from fleet import scheduler
-from fleet.control import stop
-from fleet.execution import coordination
-from fleet.instructions import submit
-from fleet.models import Execution, Instruction, TimeSlot
+from execution import coordination, scheduler
+from execution.control import stop
+from execution.instructions import submit
+from execution.models import Execution, Instruction, TimeSlot
 from robots.models import Robot
 from tests.execution.helpers import parse, step, wait_final, wait_for
 
@@ -80,7 +79,7 @@ def test_unknown_robot_and_missing_robot_are_refused_in_words(table12_world, fle
 
 
 def test_a_robot_held_by_another_operator_is_refused(table12_world, operator, second_operator):
-    from fleet.leases import take
+    from access.leases import take
 
     TimeSlot.objects.filter(robot__name="tiago").update(enabled=False)  # free at any hour the test runs
     take(second_operator, Robot.objects.get(name="tiago"))

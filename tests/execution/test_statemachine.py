@@ -2,7 +2,7 @@
 
 import pytest
 
-from fleet.statemachine import (
+from fleetcore.states import (
     PRIORITY,
     Admission,
     Event,
@@ -87,8 +87,8 @@ def test_next_leg_and_next_task_are_self_transitions():
 
 
 def test_the_plain_states_are_the_models_states():
-    """fleet.statemachine needs no Django, so it spells the states again; they must not drift apart."""
-    from fleet.statemachine import State
+    """fleetcore.states needs no Django, so it spells the states again; they must not drift apart."""
+    from fleetcore.states import State
     from robots.models import Robot
 
     assert [s.value for s in State] == list(Robot.State.values)

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 from django.db import connection
 
-from fleet.execution import coordination, watchdog
-from fleet.instructions import submit
-from fleet.models import Execution, Instruction
+from execution import coordination, watchdog
+from execution.instructions import submit
+from execution.models import Execution, Instruction
 from tests.execution.helpers import parse, step, transitions, wait_final, wait_for
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]

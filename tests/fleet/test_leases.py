@@ -5,8 +5,9 @@ from datetime import timedelta
 import pytest
 from django.utils import timezone
 
-from fleet import leases
-from fleet.models import AuditEntry, ControlLease
+from access import leases
+from access.models import ControlLease
+from audit.models import AuditEntry
 from robots.models import Robot
 
 

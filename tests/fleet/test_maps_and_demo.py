@@ -5,8 +5,9 @@ from pathlib import Path
 import pytest
 from django.core.management import CommandError, call_command
 
-from fleet.models import Location, Map, TimeSlot
-from fleet.worlds import load_world_into_db
+from execution.models import TimeSlot
+from places.models import Location, Map
+from places.worlds import load_world_into_db
 from robots.models import Robot
 
 PAPER_MAP = Path(__file__).resolve().parents[2] / "simworker" / "worlds" / "paper" / "map.yaml"
@@ -16,7 +17,7 @@ PAPER_MAP = Path(__file__).resolve().parents[2] / "simworker" / "worlds" / "pape
 def test_import_map_stores_the_grid_as_map_server_reads_it():
     call_command("import_map", "office", str(PAPER_MAP))
     row = Map.objects.get(name="office")
-    from fleet.mapfile import load_map
+    from fleetcore.mapfile import load_map
 
     grid = load_map(PAPER_MAP)
     assert (row.width, row.height, row.resolution) == (grid.width, grid.height, grid.resolution)

@@ -1,9 +1,9 @@
-"""Read the shared acceptance table of instructions."""
+"""Read the acceptance table of instructions (tests/data/instructions.tsv: text -> expected parse)."""
 
 import csv
 from pathlib import Path
 
-TSV = Path(__file__).resolve().parents[3] / "shared" / "acceptance" / "instructions.tsv"
+TSV = Path(__file__).resolve().parents[1] / "data" / "instructions.tsv"
 COLUMNS = ["text", "type", "needs_user", "action", "robots", "destination", "task", "steps"]
 
 

@@ -52,7 +52,7 @@ def fresh_store():
 @pytest.fixture
 def paper_world(db, fresh_store):
     """The demo world "paper" as Robot and Location rows (seeded ontology comes from the migration)."""
-    from fleet.models import Location, Map
+    from places.models import Location, Map
     from robots.models import Robot
 
     for i, (name, model, drive) in enumerate(ROBOTS):

@@ -2,10 +2,12 @@
 
 import pytest
 
-from fleet.models import AuditEntry, Instruction, Location
+from audit.models import AuditEntry
+from execution.models import Instruction
 from interpreter import versions
 from interpreter.models import ActionConcept, DestinationConcept, Lesson, Synonym
 from interpreter.service import interpret, store, teach, warm_up
+from places.models import Location
 
 from .acceptance import rows, summary
 

@@ -2,8 +2,9 @@
 
 import pytest
 
-from fleet.models import Location, Map, TimeSlot
+from execution.models import TimeSlot
 from fleet.testrun import chromium_path
+from places.models import Location, Map
 from robots.models import Binding, Robot
 from simworker.testing import free_port
 

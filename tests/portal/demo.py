@@ -10,8 +10,8 @@ DEMO_KEYS = ("robots", "namespaced", "turtlebot", "husky", "tiago")  # "robots":
 @contextmanager
 def pose_stream():
     """Stream every registered robot's poses to the browsers (what robotlinks does in `make run`)."""
-    from fleet.poses import PoseHub, follow
     from robots.models import Robot
+    from robots.poses import PoseHub, follow
 
     state = {}
 
@@ -38,7 +38,7 @@ def pose_stream():
 @contextmanager
 def demo_world():
     """The paper world running, its map and locations in the database; yields the world handle."""
-    from fleet.worlds import load_world_into_db
+    from places.worlds import load_world_into_db
     from simworker.testing import running_world
 
     with running_world("paper") as world:

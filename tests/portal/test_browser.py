@@ -4,7 +4,7 @@ import threading
 
 import pytest
 
-from fleet import leases
+from access import leases
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(90)]
 

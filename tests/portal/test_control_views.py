@@ -5,8 +5,8 @@ import json
 import pytest
 from django.urls import reverse
 
-from fleet import leases
-from fleet.models import AuditEntry
+from access import leases
+from audit.models import AuditEntry
 
 
 def _post(client, path, body):
@@ -17,12 +17,12 @@ def _post(client, path, body):
 
 @pytest.fixture
 def fake_control(monkeypatch):
-    """Record what reaches fleet.control instead of talking to robots; the checks are the real ones."""
+    """Record what reaches execution.control instead of talking to robots; the checks are the real ones."""
     import importlib
 
     import fleet
 
-    real = importlib.import_module("fleet.control")
+    real = importlib.import_module("execution.control")
     calls = []
 
     class Control:
@@ -38,7 +38,7 @@ def fake_control(monkeypatch):
             calls.append(("teleop", grant.robot_name, user.username, v, w))
             return v, w
 
-    monkeypatch.setitem(__import__("sys").modules, "fleet.control", Control)
+    monkeypatch.setitem(__import__("sys").modules, "execution.control", Control)
     monkeypatch.setattr(fleet, "control", Control, raising=False)
     return calls
 

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from fleet.models import Execution
+from execution.models import Execution
 from tests.portal.demo import demo_urls, demo_world, pose_stream
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.timeout(180)]

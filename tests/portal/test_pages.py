@@ -3,8 +3,9 @@
 import pytest
 from django.urls import reverse
 
-from fleet import leases
-from fleet.models import AuditEntry, Instruction
+from access import leases
+from audit.models import AuditEntry
+from execution.models import Instruction
 from robots.models import Binding
 
 PAGES = ["dashboard", "robot-list", "registration", "schedules", "history"]

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from fleet.poses import PoseHub, compose, inverse, pose_of, stream_endpoint, yaw_of
+from robots.poses import PoseHub, compose, inverse, pose_of, stream_endpoint, yaw_of
 
 
 def odometry(x, y, yaw, v=0.0, w=0.0) -> dict:
@@ -123,7 +123,7 @@ async def test_stream_endpoint_subscribes_with_throttle_and_feeds_callbacks():
     hub = PoseHub(publish=Sink())
     async with websockets.serve(server, "127.0.0.1", 0) as ws_server:
         port = ws_server.sockets[0].getsockname()[1]
-        from fleet.poses import Subscription
+        from robots.poses import Subscription
 
         sub = Subscription(1, "/odom", "nav_msgs/Odometry", lambda msg: got.put_nowait(pose_of(msg)), 100)
         stop = asyncio.Event()

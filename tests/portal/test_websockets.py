@@ -6,9 +6,11 @@ import pytest
 from asgiref.sync import sync_to_async
 from channels.testing import WebsocketCommunicator
 
-from fleet import leases, live
+import live
+from access import leases
+from access.models import ControlLease
 from fleet.asgi import application
-from fleet.models import ControlLease, StateTransition
+from robots.models import StateTransition
 
 pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.asyncio, pytest.mark.timeout(30)]
 
@@ -213,7 +215,7 @@ async def test_a_held_teleop_is_rechecked_while_held(
     operator, second_operator, fleet, published, monkeypatch
 ):
     """Without any push (a lost message), the periodic re-check still finds the lease and says so."""
-    from fleet import control
+    from execution import control
 
     monkeypatch.setattr(control, "GRANT_S", 0.4)
     monkeypatch.setattr(live, "lease", lambda robot: None)  # the push is lost
@@ -232,7 +234,7 @@ async def test_a_held_teleop_is_rechecked_while_held(
 
 
 async def test_held_teleop_audits_changes_not_repeats(operator, fleet, published):
-    from fleet.models import AuditEntry
+    from audit.models import AuditEntry
 
     turtlebot = fleet["turtlebot"]
     communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
@@ -282,14 +284,13 @@ def recorded(monkeypatch):
             events.append(("control.stop", sorted(robot.name for robot in robots)))
             return {robot.name: "stopped" for robot in robots}
 
-    monkeypatch.setitem(__import__("sys").modules, "fleet.control", Control)
+    monkeypatch.setitem(__import__("sys").modules, "execution.control", Control)
     monkeypatch.setattr(fleet, "control", Control, raising=False)
     return events
 
 
 async def test_a_stop_publishes_zero_before_any_database_work(operator, fleet, recorded):
-    from fleet import fast_stop
-    from fleet.execution import coordination
+    from execution import coordination, fast_stop
 
     turtlebot = fleet["turtlebot"]
     communicator = await _connect("/ws/fleet/", operator)
@@ -305,7 +306,7 @@ async def test_a_stop_publishes_zero_before_any_database_work(operator, fleet, r
 
 
 async def test_a_viewer_stop_publishes_nothing(viewer, fleet, recorded):
-    from fleet import fast_stop
+    from execution import fast_stop
 
     communicator = await _connect("/ws/fleet/", viewer)
     await communicator.receive_json_from(timeout=5)
@@ -318,7 +319,7 @@ async def test_a_viewer_stop_publishes_nothing(viewer, fleet, recorded):
 
 
 async def test_presses_that_come_together_are_checked_in_one_call(operator, fleet, published, monkeypatch):
-    from fleet import control
+    from execution import control
 
     calls = []
     real = control.teleop_grants

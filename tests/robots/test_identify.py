@@ -1,4 +1,4 @@
-"""Topic identification on graphs built from ../shared/reference/robot_profiles.yaml (plain data, no server)."""
+"""Topic identification on graphs built from tests/data/robot_profiles.yaml (a copy of the reference profiles: plain data, no server)."""
 
 from pathlib import Path
 
@@ -8,7 +8,7 @@ import yaml
 from robots.discovery import Graph, TopicInfo
 from robots.identify import Vocabulary, identify
 
-PROFILES = yaml.safe_load(Path("/work/shared/reference/robot_profiles.yaml").read_text())["robots"]
+PROFILES = yaml.safe_load(Path(__file__).resolve().parents[1] / "data" / "robot_profiles.yaml".read_text())["robots"]
 TWIST, ODOM = "geometry_msgs/Twist", "nav_msgs/Odometry"
 
 

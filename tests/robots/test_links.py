@@ -6,7 +6,7 @@ import pytest
 from asgiref.sync import sync_to_async
 from channels.layers import get_channel_layer
 
-from fleet.live import FLEET_GROUP
+from live import FLEET_GROUP
 from robots.links import LinkManager
 from robots.models import Robot
 from robots.registration import register_endpoints
@@ -98,7 +98,7 @@ ODOMETRY_AT_1_5 = {
 
 async def test_links_stream_map_poses_to_the_portal(endpoint):
     """The links process's pose hook: odometry on the robot's bound topic becomes a batched map pose."""
-    from fleet.poses import PoseHub, link_hook
+    from robots.poses import PoseHub, link_hook
 
     ep = endpoint()
     await sync_to_async(register_endpoints)([ep.url])

@@ -6,7 +6,7 @@ from io import StringIO
 import pytest
 from django.core.management import CommandError, call_command
 
-from fleet.models import TimeSlot
+from execution.models import TimeSlot
 from robots.binding import choose
 from robots.models import Binding, RegistrationRecord, Robot, Topic
 from robots.registration import register_endpoints
@@ -22,7 +22,7 @@ def bound(robot: Robot, action: str) -> str:
 
 
 def test_demo_world_registers_seven_robots_with_move_odometry_and_wheels(paper_world):
-    from fleet.worlds import load_world_into_db
+    from places.worlds import load_world_into_db
 
     load_world_into_db("paper")
     results = register_endpoints([paper_world.urls[k] for k in DEMO])

@@ -2,9 +2,9 @@
 
 import pytest
 
+from fleetcore.catalog import MODELS
+from fleetcore.catalog import urdf as sim_urdf
 from robots import urdf
-from simworker.models_catalog import MODELS
-from simworker.models_catalog import urdf as sim_urdf
 
 TIAGO_LIKE = """<robot name="tiago">
   <link name="base_link"><collision><origin xyz="0 0 0.1"/><geometry><cylinder radius="0.275" length="0.2"/></geometry></collision></link>

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from simworker.models_catalog import model
+from fleetcore.catalog import model
 from simworker.testing import running_world
 
 PROBE = Path(__file__).with_name("roslibpy_probe.py")

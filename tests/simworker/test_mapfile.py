@@ -2,7 +2,7 @@
 
 import pytest
 
-from fleet.mapfile import FREE, OCCUPIED, UNKNOWN, MapFormatError, OccupancyGrid, load_map, save_map
+from fleetcore.mapfile import FREE, OCCUPIED, UNKNOWN, MapFormatError, OccupancyGrid, load_map, save_map
 
 YAML = "image: m.pgm\nresolution: 0.5\norigin: [-1.0, -2.0, 0.0]\nnegate: {negate}\noccupied_thresh: 0.65\nfree_thresh: 0.196\n{mode}"
 

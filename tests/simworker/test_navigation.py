@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from simworker.world import load_world
+from fleetcore.world import load_world
 
 pytestmark = pytest.mark.timeout(90)
 GOAL_A = {"position": {"x": 2.0, "y": 2.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}

@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from simworker.models_catalog import model
+from fleetcore.catalog import model
+from fleetcore.world import load_world
 from simworker.physics import Physics
-from simworker.world import load_world
 
 
 @pytest.fixture

@@ -1,9 +1,9 @@
-"""fleet.planning: A* on the occupancy grid, and around robots the map does not show."""
+"""fleetcore.planning: A* on the occupancy grid, and around robots the map does not show."""
 
 import math
 
-from fleet.planning import Planner
-from simworker.world import load_world
+from fleetcore.planning import Planner
+from fleetcore.world import load_world
 
 B, C, SPOT_I = (-2.0, 2.0), (2.0, -2.0), (-1.0, 1.0)  # the straight line from B to C passes through I
 

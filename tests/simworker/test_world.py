@@ -3,11 +3,11 @@
 import math
 
 import pytest
+from fleetcore.worlds.make_paper_map import build
 
-from fleet.planning import Planner
-from simworker.models_catalog import model
-from simworker.world import WorldFormatError, load_world
-from simworker.worlds.make_paper_map import build
+from fleetcore.catalog import model
+from fleetcore.planning import Planner
+from fleetcore.world import WorldFormatError, load_world
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ from django.conf import settings
 from django.contrib.auth.models import Group, User
 from django.core.management.base import BaseCommand, CommandError
 
-from fleet.roles import ADMIN, sync_groups
+from access.roles import ADMIN, sync_groups
 
 
 class Command(BaseCommand):
@@ -18,8 +18,8 @@ class Command(BaseCommand):
     def handle(self, *args, world, **options):
         sync_groups()
         password = self.ensure_admin()
-        from fleet.worlds import load_world_into_db
-        from simworker.world import WorldFormatError
+        from fleetcore.world import WorldFormatError
+        from places.worlds import load_world_into_db
 
         try:
             summary = load_world_into_db(world)

@@ -14,7 +14,7 @@ from robots.registration import discover_all, store_all
 
 def world_endpoints(name: str, host: str, port_base: int) -> list[str]:
     """The URLs of a simulator world's endpoints that carry robots."""
-    from simworker.world import WorldFormatError, load_world
+    from fleetcore.world import WorldFormatError, load_world
 
     try:
         world = load_world(name)
@@ -54,7 +54,7 @@ class Command(BaseCommand):
         asyncio.run(self.main(urls, opts["wait"], opts["only"]))
 
     async def main(self, urls: list[str], wait: float, only: bool) -> None:
-        from fleet.poses import PoseHub, link_hook
+        from robots.poses import PoseHub, link_hook
 
         hub = PoseHub()  # live poses for the portal, from the links' own odometry subscriptions
         manager = LinkManager(urls if only else None, hooks=[link_hook(hub)])

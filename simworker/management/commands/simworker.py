@@ -13,7 +13,7 @@ class Command(BaseCommand):
     requires_migrations_checks = False
 
     def add_arguments(self, parser):
-        parser.add_argument("--world", default="paper", help="world name under simworker/worlds or a path")
+        parser.add_argument("--world", default="paper", help="world name under fleetcore/worlds or a path")
         parser.add_argument(
             "--extra", type=int, default=0, help="extra namespaced robots on the extra endpoint"
         )

@@ -1,0 +1,86 @@
+"""Who holds control of a robot: a lease with expiry, visible to all; admins may take it over.
+
+An operator commands a robot that nobody holds, or that they hold themselves. Viewers never command.
+"""
+
+from datetime import timedelta
+
+from django.conf import settings
+from django.db import transaction
+from django.utils import timezone
+
+import live
+from access.models import ControlLease
+from access.roles import can_control, can_register
+from audit import records as audit
+
+
+class ControlRefused(Exception):
+    """The user may not command this robot now; the message says why, in words."""
+
+
+def active(robots):
+    """The leases held now on these robots (a queryset, users joined)."""
+    return ControlLease.objects.filter(robot__in=robots, expires_at__gt=timezone.now()).select_related("user")
+
+
+def holder(robot):
+    """The user holding the robot's lease now, or None."""
+    lease = active([robot]).first()
+    return lease.user if lease else None
+
+
+_ASK = object()
+
+
+def check_command(user, robot, held_by=_ASK) -> None:
+    """Raise ControlRefused unless the user may command the robot now (held_by: its holder, if known)."""
+    if not can_control(user):
+        raise ControlRefused(f"{user.username} may only view robots, not command them.")
+    if held_by is _ASK:
+        held_by = holder(robot)
+    if held_by is not None and held_by != user:
+        raise ControlRefused(f"{robot.name} is held by {held_by.username}; ask them to release it.")
+
+
+def check_stop(user) -> None:
+    """Raise ControlRefused unless the user may stop robots: any operator stops any robot, held or not.
+
+    A lease keeps others from driving a robot, never from stopping it: a stop always gets through.
+    """
+    if not can_control(user):
+        raise ControlRefused(f"{user.username} may only view robots, not command them.")
+
+
+@transaction.atomic
+def take(user, robot, seconds: int | None = None) -> ControlLease:
+    """Take (or renew) control of a robot; an admin takes over from anyone."""
+    if not can_control(user):
+        raise ControlRefused(f"{user.username} may only view robots, not command them.")
+    seconds = seconds or settings.FLEET_CONTROL_LEASE_SECONDS
+    lease = ControlLease.objects.select_for_update().filter(robot=robot).first()
+    now = timezone.now()
+    if lease and lease.expires_at > now and lease.user != user and not can_register(user):
+        raise ControlRefused(
+            f"{robot.name} is held by {lease.user.username} until {lease.expires_at:%H:%M:%S}."
+        )
+    taken_over = lease.user.username if lease and lease.expires_at > now and lease.user != user else None
+    lease, _ = ControlLease.objects.update_or_create(
+        robot=robot, defaults={"user": user, "taken_at": now, "expires_at": now + timedelta(seconds=seconds)}
+    )
+    audit.record(user, "control.take", robot.name, taken_over_from=taken_over, seconds=seconds)
+    live.lease(robot)  # on commit: every page, and every socket's teleop grant for the robot, sees it
+    return lease
+
+
+def release(user, robot) -> bool:
+    """Give control back; only the holder or an admin can."""
+    lease = ControlLease.objects.filter(robot=robot).first()
+    if lease is None:
+        return False
+    if lease.user != user and not can_register(user):
+        raise ControlRefused(f"{robot.name} is held by {lease.user.username}, not by you.")
+    lease.delete()
+    audit.record(user, "control.release", robot.name)
+    live.lease(robot)
+    return True

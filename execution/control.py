@@ -1,0 +1,225 @@
+"""Direct control: stop and teleoperation, published from the calling process, bypassing every queue.
+
+stop() raises the robots' stop flags (running executions see them on their next control tick), publishes a
+zero velocity on each robot's move topic at once and cancels its ROS 1 navigation goal (ROS 2 goals are
+cancelled by their runner on its next tick), and cancels the robots' queued executions.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+from django.core.cache import cache
+from django.utils import timezone
+
+from access import leases
+from access.leases import ControlRefused, check_stop
+from audit import records as audit
+from execution import coordination
+from execution.link import LinkError, publish_zero
+from execution.models import Execution
+from execution.runner import settle
+from fleetcore import motion
+from robots.models import Robot
+
+log = logging.getLogger(__name__)
+
+WAITING = (Execution.Status.QUEUED, Execution.Status.PREEMPTED)
+
+
+def _robots(robots) -> list[Robot]:
+    """Robots from robots, names or primary keys."""
+    robots = list(robots)
+    if robots and all(isinstance(r, Robot) for r in robots):
+        return robots
+    names = [r for r in robots if isinstance(r, str)]
+    pks = [r for r in robots if isinstance(r, int)]
+    found = list(Robot.objects.filter(name__in=names)) + list(Robot.objects.filter(pk__in=pks))
+    missing = set(names) - {r.name for r in found}
+    if missing:
+        raise ValueError(f"No robot named {', '.join(sorted(missing))} is registered.")
+    return found
+
+
+def stop(robots, user, source: str = "console") -> dict[str, str]:
+    """Stop these robots now; return {robot name: "stopped" or the reason it could not be reached}."""
+    robots = _robots(robots)
+    if user is not None:
+        check_stop(user)  # held robots too: a lease never blocks a stop
+    coordination.request_stop([robot.pk for robot in robots])
+    with ThreadPoolExecutor(max_workers=min(8, max(1, len(robots)))) as pool:
+        results = dict(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
+    cancel_waiting(robots, "stopped")
+    audit.record(user, "stop", ", ".join(r.name for r in robots)[:255], source=source, results=results)
+    return results
+
+
+def _publish_zero(robot: Robot) -> str:
+    try:
+        publish_zero(robot)
+    except (LinkError, Exception) as exc:  # one unreachable robot must not keep the others moving
+        log.warning("stop %s: %s", robot.name, exc)
+        return f"not reached: {exc}"
+    return "stopped"
+
+
+def cancel_waiting(robots, reason: str) -> int:
+    """Cancel the robots' queued (and preempted) executions and settle their instructions."""
+    rows = list(
+        Execution.objects.filter(robot__in=robots, status__in=WAITING).values_list("pk", "instruction_id")
+    )
+    done = Execution.objects.filter(pk__in=[pk for pk, _ in rows], status__in=WAITING).update(
+        status=Execution.Status.CANCELLED, finished_at=timezone.now(), error=reason
+    )
+    for instruction_id in {iid for _, iid in rows}:
+        settle(instruction_id)
+    return done
+
+
+HELD_REPEAT_S = 2  # a held button repeats every 0.2 s; a longer gap is a new press
+
+
+@dataclass(frozen=True)
+class TeleopGrant:
+    """What the checks of one teleop command established: where to publish, within which limits, until when.
+
+    A held button sends a command every 0.2 s. The portal's WebSocket keeps one grant per robot and publishes
+    the repeats under it without the database; it drops the grant when the robot's lease or state changes
+    (pushed to every page) and re-checks all its grants at once every GRANT_S while they are used.
+    """
+
+    robot_id: int
+    robot_name: str
+    endpoint: str
+    target: str
+    message_type: str
+    ros_version: int
+    max_linear: float
+    max_angular: float
+    expires: float
+
+    @property
+    def valid(self) -> bool:
+        return time.monotonic() < self.expires
+
+    def clamp(self, linear: float, angular: float) -> tuple[float, float]:
+        return motion.clamp(float(linear), self.max_linear), motion.clamp(float(angular), self.max_angular)
+
+    def message(self, v: float, w: float) -> dict:
+        return motion.velocity_message(v, w, self.message_type, self.ros_version)
+
+
+GRANT_S = 1.0
+
+
+def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
+    """Check at once that the user may drive each robot now: {robot id: its grant, or the refusal}.
+
+    Four queries whatever the number of robots, so a socket holding many buttons re-checks them cheaply.
+    Refusals: ControlRefused (role, someone else's lease, a running instruction), LinkError (no move topic),
+    ValueError (no such robot).
+    """
+    from robots.models import Binding
+
+    ids = list(dict.fromkeys(robot_ids))
+    robots = {robot.pk: robot for robot in Robot.objects.filter(pk__in=ids)}
+    found = list(robots)
+    held = {lease.robot_id: lease.user for lease in leases.active(found)}
+    busy = dict(
+        Execution.objects.filter(robot__in=found, status=Execution.Status.RUNNING).values_list(
+            "robot_id", "instruction_id"
+        )
+    )
+    moves = {}
+    for binding in Binding.objects.filter(robot__in=found, action="move").exclude(target="").order_by("-pk"):
+        moves[binding.robot_id] = binding
+    expires = time.monotonic() + GRANT_S
+    out: dict[int, TeleopGrant | Exception] = {}
+    for pk in ids:
+        robot = robots.get(pk)
+        if robot is None:
+            out[pk] = ValueError(f"robot {pk}: no such robot")
+            continue
+        try:
+            leases.check_command(user, robot, held_by=held.get(pk))
+        except ControlRefused as exc:
+            out[pk] = exc
+            continue
+        if pk in busy:
+            out[pk] = ControlRefused(f"{robot.name} is running instruction #{busy[pk]}; stop it first.")
+        elif (move := moves.get(pk)) is None:
+            out[pk] = LinkError(f"{robot.name}: no move topic is bound")
+        else:
+            out[pk] = TeleopGrant(
+                robot.pk, robot.name, robot.endpoint, move.target, move.message_type or "geometry_msgs/Twist",
+                robot.ros_version, robot.max_linear, robot.max_angular, expires,
+            )  # fmt: skip
+    return out
+
+
+def teleop_grant(robot, user) -> TeleopGrant:
+    """Check that the user may drive the robot now and find its move topic (ControlRefused / LinkError)."""
+    robot = _robots([robot])[0]
+    grant = teleop_grants([robot.pk], user)[robot.pk]
+    if isinstance(grant, Exception):
+        raise grant
+    return grant
+
+
+def teleop_with(grant: TeleopGrant, user, linear: float, angular: float) -> tuple[float, float]:
+    """Publish one velocity command under a grant, within the robot's limits; return what was sent."""
+    from robots.rosbridge.sync import get_client
+
+    v, w = grant.clamp(linear, angular)
+    try:
+        client = get_client(grant.endpoint)
+    except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the person
+        raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
+    client.publish(grant.target, grant.message(v, w), grant.message_type)
+    _audit_teleop(user, grant, v, w)
+    return v, w
+
+
+async def publish_teleop(grant: TeleopGrant, linear: float, angular: float) -> tuple[float, float]:
+    """teleop_with for code on an event loop: one send on the loop's own link, no thread, no database.
+
+    The caller audits changes (audit_teleops, from a thread); a held button's repeats need no audit.
+    """
+    from robots.rosbridge import pool
+
+    v, w = grant.clamp(linear, angular)
+    try:
+        client = await pool.client(grant.endpoint)
+        await client.publish(grant.target, grant.message(v, w), grant.message_type)
+    except Exception as exc:  # the link is down or went down: a one-line reason for the person
+        raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
+    return v, w
+
+
+def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
+    """Publish one velocity command within the robot's limits; return what was sent.
+
+    Refused (ControlRefused) while an instruction drives the robot: stop it first.
+    """
+    return teleop_with(teleop_grant(robot, user), user, linear, angular)
+
+
+def audit_teleops(user, changes) -> None:
+    """Audit a socket's changes of teleop commands in one write: (robot name, at, v, w) each."""
+    audit.record_many(user, "teleop", [(name, at, {"linear": v, "angular": w}) for name, at, v, w in changes])
+
+
+def _audit_teleop(user, grant: TeleopGrant, v: float, w: float) -> None:
+    """Audit each change of a person's teleop command, not each 5 Hz repeat of a held button.
+
+    The trail still says who drove which robot at what speed from when to when; the repeats would only add
+    a database write to every command on the hot path. After HELD_REPEAT_S without a command, the next one
+    is a new press and audited again.
+    """
+    key = f"teleop:last:{grant.robot_id}:{getattr(user, 'pk', None)}"
+    if cache.get(key) != [v, w]:
+        audit.record(user, "teleop", grant.robot_name, linear=v, angular=w)
+    cache.set(key, [v, w], timeout=HELD_REPEAT_S)

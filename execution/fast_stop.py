@@ -1,0 +1,133 @@
+"""A stop from a page's WebSocket leaves before any database work: stop flags, then zero velocities, from the loop.
+
+The web process keeps what a stop needs per robot in memory (endpoint, move topic and type, ROS version, the
+move_base cancel topic), loaded in one query and reloaded in the background when older than RELOAD_S. A stop
+raises the robots' Redis stop flags (a running instruction sees them on its next tick and publishes nothing
+more), then publishes a zero velocity, and cancels a move_base goal, to every robot at once on this loop's own
+rosbridge links (robots.rosbridge.pool).
+
+This is only a head start: control.stop then runs in a thread as it always did (checks, flags, a second zero
+that changes nothing, queued instructions cancelled, audit) and its answer is what the person reads. A robot
+registered since the last load (a registration's push, or a stop naming it, reloads them at once), or a link not
+up yet, is stopped by that second step alone.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from dataclasses import dataclass
+
+from channels.db import database_sync_to_async
+
+log = logging.getLogger(__name__)
+
+RELOAD_S = 10.0
+
+
+@dataclass(frozen=True)
+class StopTarget:
+    robot_id: int
+    endpoint: str
+    target: str
+    message_type: str
+    ros_version: int
+    cancel: str | None  # the move_base cancel topic, for robots whose goals go to move_base
+
+
+def load_targets() -> dict[int, StopTarget]:
+    """Every robot's stop target (one query for robots and bindings); robots without a move topic are left out."""
+    from execution.link import NAV_MOVE_BASE, action_namespace, bindings_of, navigation_kind
+    from robots.models import Robot
+
+    targets = {}
+    for robot in Robot.objects.prefetch_related("bindings"):
+        bindings = bindings_of(robot)
+        move, navigate = bindings.get("move"), bindings.get("navigate")
+        if move is None:
+            continue
+        cancel = None
+        if navigation_kind(navigate) == NAV_MOVE_BASE:
+            cancel = f"{action_namespace(navigate.target)}/cancel"
+        targets[robot.pk] = StopTarget(
+            robot.pk,
+            robot.endpoint,
+            move.target,
+            move.message_type or "geometry_msgs/Twist",
+            robot.ros_version,
+            cancel,
+        )
+    return targets
+
+
+class Targets:
+    """The process's stop targets, reloaded in the background when stale (never on a stop's way)."""
+
+    def __init__(self) -> None:
+        self.by_robot: dict[int, StopTarget] = {}
+        self.loaded_at = float("-inf")
+        self.loading: asyncio.Task | None = None
+
+    def refresh(self, now: bool = False) -> None:
+        """Reload in the background if stale (now: at once), and open the links stops will use (on this loop)."""
+        current = self.loading is not None and self.loading.get_loop() is asyncio.get_running_loop()
+        if current and not self.loading.done():
+            return
+        if current and not now and time.monotonic() - self.loaded_at < RELOAD_S:
+            return
+        self.loading = asyncio.ensure_future(self._load())
+
+    async def _load(self) -> None:
+        from robots.rosbridge import pool
+
+        try:
+            self.by_robot = await database_sync_to_async(load_targets, thread_sensitive=False)()
+        except Exception:  # the database is away: stops still go the full way
+            log.exception("loading stop targets failed")
+            return
+        self.loaded_at = time.monotonic()
+        for endpoint in {target.endpoint for target in self.by_robot.values()}:
+            opening = asyncio.ensure_future(pool.client(endpoint, connect_timeout=5.0))
+            opening.add_done_callback(_quiet)  # a robot that is down is said by the stop itself
+
+    def of(self, robot_ids) -> list[StopTarget]:
+        if robot_ids == "all":
+            return list(self.by_robot.values())
+        return [self.by_robot[pk] for pk in robot_ids if pk in self.by_robot]
+
+
+def _quiet(task: asyncio.Task) -> None:
+    if not task.cancelled():
+        task.exception()
+
+
+TARGETS = Targets()
+
+
+async def stop_now(robot_ids) -> int:
+    """Flags, then a zero velocity to each known robot whose link is up; how many zeros went out."""
+    from execution import coordination
+    from fleetcore import motion
+    from robots.rosbridge import pool
+
+    targets = TARGETS.of(robot_ids)
+    TARGETS.refresh(now=robot_ids != "all" and len(targets) < len(robot_ids))  # robots new since the load
+    if not targets:
+        return 0
+    await coordination.arequest_stop([target.robot_id for target in targets])
+
+    async def zero(target: StopTarget) -> bool:
+        try:
+            link = await pool.client(target.endpoint, connect_timeout=0.0)
+            now = time.time()
+            message = motion.velocity_message(0.0, 0.0, target.message_type, target.ros_version, now)
+            await link.publish(target.target, message, target.message_type)
+            if target.cancel:
+                await link.publish(target.cancel, motion.goal_id("", now), "actionlib_msgs/GoalID")
+        except Exception as exc:  # not up yet, or down: control.stop tries it next and says why
+            log.info("fast stop of robot %s skipped: %s", target.robot_id, exc)
+            return False
+        return True
+
+    return sum(await asyncio.gather(*(zero(target) for target in targets)))

@@ -1,0 +1,156 @@
+"""Teleop over one page's WebSocket: the checks once per press, then every repeat straight from the event loop.
+
+A held button sends its command every 0.2 s, and a fleet page may hold many robots' buttons at once. So:
+
+- The first command for a robot runs the checks in a thread (role, lease, running instruction, move topic:
+  control.teleop_grants), the first commands of robots pressed together in one call; a refusal is answered
+  in words and audited.
+- Under the grant this gives, commands are published with one send on this loop's own rosbridge link: no
+  thread, no database. A robot's commands go out in the order they came; different robots' never wait for
+  each other.
+- A grant is dropped when the robot's lease or state changes (the pushes every page gets: drop()), and all
+  grants in use are re-checked at once, in one thread call, every GRANT_S / 2; a grant not used since the
+  last re-check is dropped (the button was released). A refusal found then is said to the person.
+- A change of speed is audited after it was published, from a thread, changes that come while one write is
+  under way going together in the next; a repeat is not audited.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+
+from channels.db import database_sync_to_async
+from django.utils import timezone
+
+log = logging.getLogger(__name__)
+
+GATHER_S = 0.002  # presses arriving within this share one check (a check takes a few ms itself)
+
+
+class HeldTeleop:
+    """One socket's teleop: grants per robot, per-robot ordered publishing, re-checks and write-behind audit."""
+
+    def __init__(self, user, send_json: Callable[[dict], Awaitable[None]], checks, control) -> None:
+        self.user, self.send_json = user, send_json
+        self.checks = checks  # (user, robot ids) -> {id: grant, or the refusal}, in a thread
+        self.control = control  # execution.control: teleop_grants, publish_teleop, audit_teleops, GRANT_S
+        self.grants: dict[int, object] = {}
+        self.used: set[int] = set()
+        self.audited: dict[int, tuple[float, float]] = {}
+        self.chains: dict[object, asyncio.Future] = {}
+        self.unaudited: list[tuple] = []
+        self.auditing: asyncio.Task | None = None
+        self.rechecking: asyncio.Task | None = None
+        self.wanted: dict[int, asyncio.Future] = {}  # presses waiting for their checks
+        self.checking: asyncio.Task | None = None
+
+    def take(self, content: dict, linear: float, angular: float) -> None:
+        """Queue one command behind the same robot's earlier ones (and no one else's)."""
+        key = content.get("robot")
+        key = key if isinstance(key, int) else repr(key)
+        task = asyncio.ensure_future(self._one(self.chains.get(key), content, linear, angular))
+        self.chains[key] = task
+        task.add_done_callback(lambda done: self.chains.get(key) is done and self.chains.pop(key))
+
+    def drop(self, robot_id) -> None:
+        """The robot's lease or state changed: its next command goes through the checks again."""
+        self.grants.pop(robot_id, None)
+
+    def close(self) -> None:
+        for task in [*self.chains.values(), *([self.rechecking] if self.rechecking else [])]:
+            task.cancel()  # the socket that wanted these repeats is gone
+
+    async def _one(self, previous, content: dict, linear: float, angular: float) -> None:
+        if previous is not None:
+            await asyncio.gather(previous, return_exceptions=True)
+        reply = {"type": "command.result", "command": "teleop", "ref": content.get("ref")}
+        grant = self.grants.get(content.get("robot"))
+        if grant is None or not grant.valid:
+            try:
+                grant = await self._check(content.get("robot"))
+            except Exception as exc:  # refused (the checks audited it), or no such robot: said in words
+                await self.send_json({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
+                return
+            self.grants[grant.robot_id] = grant
+            if self.rechecking is None or self.rechecking.done():
+                self.rechecking = asyncio.ensure_future(self._recheck())
+        try:
+            v, w = await self.control.publish_teleop(grant, linear, angular)
+        except Exception as exc:  # the link went down under the grant: said in words, grant dropped
+            self.drop(grant.robot_id)
+            await self.send_json({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
+            return
+        self.used.add(grant.robot_id)
+        if self.audited.get(grant.robot_id) != (v, w):
+            self.audited[grant.robot_id] = (v, w)
+            self._audit(grant.robot_name, v, w)
+        detail = f"{grant.robot_name}: linear {v:.2f} m/s, angular {w:.2f} rad/s"
+        await self.send_json({**reply, "ok": True, "detail": detail})
+
+    async def _check(self, robot_id):
+        """A press's checks; presses that come together (a whole fleet's) are checked in one thread call."""
+        if not isinstance(robot_id, int) or isinstance(robot_id, bool):
+            raise LookupError("robot: no such robot")
+        wanted = self.wanted.get(robot_id)
+        if wanted is None:
+            wanted = self.wanted[robot_id] = asyncio.get_running_loop().create_future()
+            if self.checking is None or self.checking.done():
+                self.checking = asyncio.ensure_future(self._check_wanted())
+        return await wanted
+
+    async def _check_wanted(self) -> None:
+        check = database_sync_to_async(self.checks, thread_sensitive=False)
+        await asyncio.sleep(GATHER_S)  # the other presses of a burst, read from the socket meanwhile
+        while self.wanted:
+            batch, self.wanted = self.wanted, {}
+            try:
+                found = await check(self.user, list(batch))
+            except Exception as exc:  # the database is away: every press waiting is told why
+                found = dict.fromkeys(batch, exc)
+            for robot_id, wanted in batch.items():
+                if not wanted.done():
+                    grant = found[robot_id]
+                    wanted.set_exception(grant) if isinstance(grant, Exception) else wanted.set_result(grant)
+
+    async def _recheck(self) -> None:
+        """Renew the grants in use with one batched check; drop the unused and the refused ones."""
+        check = database_sync_to_async(self.control.teleop_grants, thread_sensitive=False)
+        while self.grants:
+            await asyncio.sleep(self.control.GRANT_S / 2)
+            used, self.used = self.used, set()
+            for robot_id in set(self.grants) - used:  # released: the next press is checked and audited anew
+                self.grants.pop(robot_id, None)
+                self.audited.pop(robot_id, None)
+            if not self.grants:
+                break
+            try:
+                fresh = await check(list(self.grants), self.user)
+            except Exception:  # the database is away: the grants run out, and commands go the full way
+                log.exception("teleop re-check failed")
+                continue
+            for robot_id, grant in fresh.items():
+                if robot_id not in self.grants:
+                    continue  # dropped (a lease or state push) while the check ran
+                if isinstance(grant, Exception):
+                    self.grants.pop(robot_id, None)
+                    reply = {"type": "command.result", "command": "teleop", "ref": None, "ok": False}
+                    await self.send_json({**reply, "detail": str(grant)})
+                else:
+                    self.grants[robot_id] = grant
+
+    def _audit(self, robot_name: str, v: float, w: float) -> None:
+        """Write-behind: changes wait while one write is under way, then go together in the next."""
+        self.unaudited.append((robot_name, timezone.now(), v, w))
+        if self.auditing is None or self.auditing.done():
+            self.auditing = asyncio.ensure_future(self._write_audit())
+
+    async def _write_audit(self) -> None:
+        write = database_sync_to_async(self.control.audit_teleops, thread_sensitive=False)
+        while self.unaudited:
+            batch, self.unaudited = self.unaudited, []
+            try:
+                await write(self.user, batch)
+            except Exception:  # the trail must not stop the robots; the log keeps what was lost
+                log.exception("teleop audit of %d changes failed: %s", len(batch), batch)

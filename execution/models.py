@@ -1,0 +1,132 @@
+"""Instructions, each robot's share of them (executions), and the robots' daily time slots."""
+
+from django.conf import settings
+from django.db import models
+from django.utils import timezone
+
+from places.models import Location
+from robots.models import Robot
+
+
+class TimeSlot(models.Model):
+    """A daily slot in which a robot goes to a goal and does a task (the paper's Tables 2 and 12)."""
+
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="time_slots")
+    start = models.TimeField()
+    end = models.TimeField()
+    goal = models.ForeignKey(Location, on_delete=models.PROTECT, related_name="time_slots")
+    task = models.CharField(max_length=50, blank=True, help_text="e.g. rotate(5) or clean")
+    enabled = models.BooleanField(default=True)
+    last_run_on = models.DateField(null=True, blank=True)
+
+    class Meta:
+        ordering = ["robot", "start"]
+        constraints = [
+            models.CheckConstraint(
+                condition=models.Q(start__lt=models.F("end")), name="timeslot_start_before_end"
+            ),
+        ]
+        indexes = [models.Index(fields=["robot", "start", "end"])]
+        permissions = [("edit_schedule", "Can edit robot schedules")]
+
+    def __str__(self):
+        return f"{self.robot} {self.start:%H:%M}-{self.end:%H:%M} {self.goal} {self.task}".strip()
+
+    def covers(self, moment) -> bool:
+        """Whether the slot is running at this local time."""
+        return self.enabled and self.start <= moment < self.end
+
+
+class Instruction(models.Model):
+    """What a person typed, what the interpreter made of it, and how it ended."""
+
+    class Type(models.TextChoices):
+        PLAIN = "I", "I: plain"
+        SYNONYM = "II", "II: synonym"
+        SEMANTIC = "III", "III: semantic issue"
+        SYNONYM_SEMANTIC = "IV", "IV: synonym and semantic issue"
+        NOT_PROGRAMMED = "V", "V: not programmed"
+
+    class Status(models.TextChoices):
+        RECEIVED = "received"
+        NEEDS_USER = "needs_user"
+        REFUSED = "refused"
+        QUEUED = "queued"
+        RUNNING = "running"
+        SUCCEEDED = "succeeded"
+        FAILED = "failed"
+        CANCELLED = "cancelled"
+
+    FINAL = (Status.REFUSED, Status.SUCCEEDED, Status.FAILED, Status.CANCELLED)
+
+    text = models.TextField()
+    user = models.ForeignKey(settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL)
+    robots = models.ManyToManyField(Robot, blank=True, related_name="instructions")
+    parse = models.JSONField(default=dict, blank=True)
+    type = models.CharField(max_length=3, choices=Type.choices, blank=True)
+    status = models.CharField(max_length=12, choices=Status.choices, default=Status.RECEIVED)
+    source = models.CharField(
+        max_length=20, default="console", help_text="console, api, cli, schedule, teleop"
+    )
+    answer_to = models.ForeignKey(
+        "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="answers"
+    )
+    received_at = models.DateTimeField(default=timezone.now)
+    interpreted_at = models.DateTimeField(null=True, blank=True)
+    dispatched_at = models.DateTimeField(null=True, blank=True)
+    first_command_at = models.DateTimeField(null=True, blank=True)
+    motion_started_at = models.DateTimeField(null=True, blank=True)
+    finished_at = models.DateTimeField(null=True, blank=True)
+    outcome = models.TextField(blank=True, help_text="what happened, in words for a person")
+    error = models.TextField(blank=True)
+
+    class Meta:
+        ordering = ["-received_at"]
+        indexes = [
+            models.Index(fields=["-received_at"]),
+            models.Index(fields=["status", "-received_at"]),
+            models.Index(fields=["user", "-received_at"]),
+        ]
+
+    def __str__(self):
+        return f"#{self.pk} {self.text[:60]}"
+
+    @property
+    def is_final(self) -> bool:
+        return self.status in self.FINAL
+
+
+class Execution(models.Model):
+    """One robot's share of one instruction: one step after another, each timed."""
+
+    class Status(models.TextChoices):
+        QUEUED = "queued"
+        RUNNING = "running"
+        SUCCEEDED = "succeeded"
+        FAILED = "failed"
+        CANCELLED = "cancelled"
+        PREEMPTED = "preempted"
+
+    instruction = models.ForeignKey(Instruction, on_delete=models.CASCADE, related_name="executions")
+    robot = models.ForeignKey(Robot, on_delete=models.CASCADE, related_name="executions")
+    status = models.CharField(max_length=10, choices=Status.choices, default=Status.QUEUED)
+    priority = models.PositiveSmallIntegerField(default=0, help_text="work 3 > motion 2 > dialog 1 > ready 0")
+    steps = models.JSONField(default=list, help_text="the interpreter's steps for this robot")
+    step_index = models.PositiveSmallIntegerField(default=0)
+    worker = models.CharField(max_length=255, blank=True, help_text="the Celery worker that claimed it")
+    created_at = models.DateTimeField(default=timezone.now)
+    dispatched_at = models.DateTimeField(null=True, blank=True)
+    first_command_at = models.DateTimeField(null=True, blank=True)
+    motion_started_at = models.DateTimeField(null=True, blank=True)
+    finished_at = models.DateTimeField(null=True, blank=True)
+    error = models.TextField(blank=True)
+
+    class Meta:
+        ordering = ["created_at"]
+        constraints = [
+            models.UniqueConstraint(fields=["instruction", "robot"], name="execution_unique_per_robot"),
+        ]
+        indexes = [models.Index(fields=["robot", "status", "created_at"])]
+
+    def __str__(self):
+        return f"{self.robot} #{self.instruction_id} {self.status}"

@@ -1,0 +1,99 @@
+"""Routes on the fleet's map for robots without a navigation stack: around walls and obstacles, not through.
+
+The paper's Figure 7 drives straight at the goal; a robot then stops at the first obstacle between. Here the
+portal plans on the occupancy grid it already has (fleetcore.planning, the same A* the simulated nav stacks use),
+inflated by the robot's footprint, and the Figure 7 controller drives leg by leg.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+
+from django.conf import settings
+
+from fleetcore.mapfile import OccupancyGrid
+from fleetcore.planning import Planner
+from places.models import Map
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RADIUS = 0.15  # m, when a robot has no footprint
+NEARBY_M = 6.0  # robots farther than this from the start will have moved by the time we get there
+
+
+def extents(footprint) -> tuple[float, float] | None:
+    """(x extent, y extent) of a footprint polygon [[x, y], ...]; None for no usable polygon."""
+    try:
+        xs, ys = [float(p[0]) for p in footprint], [float(p[1]) for p in footprint]
+    except (TypeError, ValueError, IndexError):
+        return None
+    if len(xs) < 3:
+        return None
+    return max(xs) - min(xs), max(ys) - min(ys)
+
+
+def footprint_radius(footprint) -> float:
+    """Half the smaller extent of the footprint polygon: the radius the robot needs to pass a gap."""
+    size = extents(footprint)
+    return min(size) / 2 if size else DEFAULT_RADIUS
+
+
+def reach_radius(footprint) -> float:
+    """Half the footprint's diagonal: the disc another robot's corners may sweep (a Husky is 1 m long)."""
+    size = extents(footprint)
+    return math.hypot(*size) / 2 if size else DEFAULT_RADIUS
+
+
+def fleet_map() -> Map | None:
+    """The map robots move on: the current world's, else the newest one."""
+    return (
+        Map.objects.filter(name=settings.FLEET_WORLD).first() or Map.objects.order_by("-created_at").first()
+    )
+
+
+@functools.lru_cache(maxsize=16)
+def _planner(map_id: int, version: str, radius: float) -> Planner:
+    """One planner per map version and robot size, per process (building one inflates the whole grid)."""
+    row = Map.objects.get(pk=map_id)
+    grid = OccupancyGrid(
+        row.resolution, row.width, row.height, (row.origin_x, row.origin_y, row.origin_yaw), row.cells()
+    )
+    return Planner(grid, radius)
+
+
+def robots_in_the_way(robot, start: tuple[float, float]) -> list[tuple[float, float, float]]:
+    """Other robots near the start as discs (x, y, radius): where the links process last saw them, and where
+    those under way are going (they will stand there when we pass)."""
+    from django.core.cache import cache
+
+    import live
+    from robots.models import Robot
+
+    others = {r.pk: r for r in Robot.objects.exclude(pk=robot.pk).only("pk", "footprint")}
+    poses = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in others])
+    spots = [(pose["id"], pose["x"], pose["y"]) for pose in poses.values() if pose.get("id") in others]
+    _, goals = live.current_work(list(others), running_only=True)
+    spots += [(pk, goal["x"], goal["y"]) for pk, goal in goals.items()]
+    return [
+        (x, y, reach_radius(others[pk].footprint))
+        for pk, x, y in spots
+        if math.dist(start, (x, y)) < NEARBY_M
+    ]
+
+
+def route(robot, start: tuple[float, float], goal: tuple[float, float]) -> list[tuple[float, float]]:
+    """Waypoints from start to goal around what the map shows and the robots parked near; [goal] without a map."""
+    row = fleet_map()
+    if row is None:
+        return [goal]
+    planner = _planner(row.pk, row.created_at.isoformat(), round(footprint_radius(robot.footprint), 2))
+    others = robots_in_the_way(robot, start)
+    path = (planner.plan(start, goal, avoid=others) if others else None) or planner.plan(start, goal)
+    if path is None:
+        log.warning(
+            "%s: no free path on map %s from %s to %s; driving straight", robot.name, row.name, start, goal
+        )
+        return [goal]
+    return path

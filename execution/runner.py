@@ -1,0 +1,189 @@
+"""Run executions: each robot's queue drained by whoever holds its Redis lock, one execution at a time.
+
+A Celery task for an instruction starts one thread per robot of the instruction. A thread that gets the
+robot's lock runs the robot's queued executions in order (the instruction's own and any queued behind it,
+whoever sent them); a thread that does not get it leaves its execution queued for the holder. A preempting
+execution is named in the robot's preempt flag: the holder interrupts the current execution (back in the
+queue, at the step it reached) and runs the preemptor next.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+from django.db import close_old_connections, connections
+from django.utils import timezone
+
+import live
+from execution import coordination
+from execution.link import LinkError, RobotLink
+from execution.models import Execution, Instruction
+from execution.steps import Interrupted, Session, StepFailed, advance, run_step
+from fleetcore.states import Event
+from robots import states
+
+log = logging.getLogger(__name__)
+
+WAITING = (Execution.Status.QUEUED, Execution.Status.PREEMPTED)
+FINAL = (Execution.Status.SUCCEEDED, Execution.Status.FAILED, Execution.Status.CANCELLED)
+OUTCOME_EVENT = {
+    "succeeded": Event.DONE,
+    "cancelled": Event.STOP,
+    "failed": Event.FAIL,
+    "preempted": Event.PREEMPT,
+}
+
+
+def execute_instruction(instruction_id: int) -> list[int]:
+    """Run every robot's share of an instruction, a thread per robot; return the robots this call drained."""
+    robot_ids = sorted(
+        set(
+            Execution.objects.filter(instruction_id=instruction_id, status__in=WAITING).values_list(
+                "robot_id", flat=True
+            )
+        )
+    )
+    drained: list[int] = []
+    threads = [threading.Thread(target=_drain_thread, args=(rid, drained), daemon=True) for rid in robot_ids]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    return drained
+
+
+def _drain_thread(robot_id: int, drained: list[int]) -> None:
+    try:
+        if drain_robot(robot_id):
+            drained.append(robot_id)
+    except Exception:
+        log.exception("robot %s: runner crashed", robot_id)
+    finally:
+        connections.close_all()
+
+
+def drain_robot(robot_id: int) -> bool:
+    """Run the robot's waiting executions under its lock; False if another runner holds it."""
+    ran = False
+    while next_execution(robot_id) is not None:
+        lock = coordination.RobotLock(robot_id)
+        if not lock.acquire():
+            return ran
+        ran = True
+        try:
+            preferred = None
+            while (execution := next_execution(robot_id, preferred)) is not None:
+                preferred = run_execution(execution, lock)
+        finally:
+            lock.release()
+    return ran
+
+
+def next_execution(robot_id: int, preferred: int | None = None) -> Execution | None:
+    """The preemptor if one is named, else the oldest waiting execution of the robot."""
+    _, flagged = coordination.flags(robot_id)
+    for pk in (preferred, flagged):
+        if pk is not None:
+            found = Execution.objects.filter(pk=pk, robot_id=robot_id, status__in=WAITING).first()
+            if found is not None:
+                return found
+    return (
+        Execution.objects.filter(robot_id=robot_id, status__in=WAITING).order_by("created_at", "pk").first()
+    )
+
+
+def claim(execution: Execution, token: str) -> bool:
+    """Mark the execution running under this token, unless someone else did first (conditional update)."""
+    now = timezone.now()
+    won = Execution.objects.filter(pk=execution.pk, status__in=WAITING).update(
+        status=Execution.Status.RUNNING, worker=token, dispatched_at=execution.dispatched_at or now
+    )
+    if won:
+        Instruction.objects.filter(
+            pk=execution.instruction_id, status__in=(Instruction.Status.QUEUED, Instruction.Status.RECEIVED)
+        ).update(status=Instruction.Status.RUNNING)
+        _push_instruction(execution.instruction_id)
+    return bool(won)
+
+
+def run_execution(execution: Execution, lock: coordination.RobotLock) -> int | None:
+    """Run one execution from its current step; return the execution that preempted it, if any."""
+    close_old_connections()
+    coordination.clear_preempt(execution.robot_id, execution.pk)
+    if not claim(execution, lock.token):
+        return None
+    execution.refresh_from_db()
+    outcome, words, preemptor = "succeeded", [], None
+    link = None
+    try:
+        link = RobotLink(execution.robot).open()
+        session = Session(execution, link, lock)
+        for index in range(execution.step_index, len(execution.steps)):
+            words.append(run_step(session, execution.steps[index]))
+            advance(execution, index + 1)
+    except Interrupted as exc:
+        outcome, preemptor = exc.outcome, exc.preemptor
+        words.append(exc.reason)
+    except (StepFailed, LinkError, ValueError) as exc:
+        outcome = "failed"
+        words.append(str(exc))
+    except Exception as exc:  # a link error or a bug: the robot is stopped and the reason kept
+        log.exception("execution %s failed", execution.pk)
+        outcome = "failed"
+        words.append(f"{type(exc).__name__}: {exc}")
+    finally:
+        _halt(link)
+    finish(execution, lock.token, outcome, "; ".join(words))
+    return preemptor
+
+
+def _halt(link: RobotLink | None) -> None:
+    if link is None:
+        return
+    try:
+        link.halt()
+    except Exception:
+        log.warning("%s: could not publish the final zero velocity", link.robot.name)
+    link.close()
+
+
+def finish(execution: Execution, token: str, outcome: str, words: str) -> bool:
+    """Record the outcome (only if this token still runs it), move the robot to ready, settle the instruction."""
+    fields = {"status": outcome, "error": "" if outcome in ("succeeded", "preempted") else words[:2000]}
+    if outcome in FINAL:
+        fields["finished_at"] = timezone.now()
+    won = Execution.objects.filter(pk=execution.pk, status=Execution.Status.RUNNING, worker=token).update(
+        **fields
+    )
+    if won:
+        states.transition(execution.robot_id, OUTCOME_EVENT[outcome], words[:255], execution.instruction_id)
+        settle(execution.instruction_id, words if outcome == "succeeded" else "")
+    return bool(won)
+
+
+def settle(instruction_id: int, note: str = "") -> None:
+    """Give the instruction its final status once every robot's share has one."""
+    rows = list(Execution.objects.filter(instruction_id=instruction_id).select_related("robot"))
+    if not rows or any(row.status not in FINAL for row in rows):
+        return
+    found = {row.status for row in rows}
+    if Execution.Status.FAILED in found:
+        status = Instruction.Status.FAILED
+    elif Execution.Status.CANCELLED in found:
+        status = Instruction.Status.CANCELLED
+    else:
+        status = Instruction.Status.SUCCEEDED
+    outcome = "; ".join(
+        f"{row.robot.name}: {row.status}{' (' + row.error + ')' if row.error else ''}" for row in rows
+    )
+    Instruction.objects.filter(pk=instruction_id).exclude(status__in=Instruction.FINAL).update(
+        status=status, finished_at=timezone.now(), outcome=outcome[:4000]
+    )
+    _push_instruction(instruction_id)
+
+
+def _push_instruction(instruction_id: int) -> None:
+    instruction = Instruction.objects.filter(pk=instruction_id).first()
+    if instruction is not None:
+        live.instruction(instruction)

@@ -1,0 +1,121 @@
+"""The scheduler loop: scheduled time slots run by themselves; lost workers and stalled queues are handled.
+
+One tick (every half second in `python manage.py scheduler`):
+1. the watchdog fails executions whose worker died (their robots get a zero velocity);
+2. robots with queued executions and no runner get a drain task;
+3. each enabled time slot that covers now and has not run today becomes an instruction (source "schedule");
+4. robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle in ready longer than
+   FLEET_IDLE_TIMEOUT_SECONDS go offline (they wake on the next instruction).
+
+The clock is injectable: Clock(start, scale) runs schedules time-compressed (tests, demos).
+"""
+
+from __future__ import annotations
+
+import datetime
+import logging
+import time
+from dataclasses import dataclass, field
+
+from django.conf import settings
+from django.db import close_old_connections
+from django.db.models import Max
+from django.utils import timezone
+
+from execution import watchdog
+from execution.models import TimeSlot
+from fleetcore.states import Event
+from robots import states
+from robots.models import Robot
+
+log = logging.getLogger(__name__)
+DIALOG_TIMEOUT = 120.0  # s
+
+
+@dataclass
+class Clock:
+    """Wall time, or a compressed clock that starts at `start` and runs `scale` times faster."""
+
+    start: datetime.datetime | None = None
+    scale: float = 1.0
+    _t0: float = field(default_factory=time.monotonic)
+
+    def now(self) -> datetime.datetime:
+        if self.start is None:
+            return timezone.now()
+        return self.start + datetime.timedelta(seconds=(time.monotonic() - self._t0) * self.scale)
+
+
+def slot_text(slot: TimeSlot) -> str:
+    task = f" and {slot.task}" if slot.task else ""
+    return f"move {slot.robot.name} to {slot.goal.name}{task}"
+
+
+def slot_parse(slot: TimeSlot) -> dict:
+    """The interpreter result a slot stands for (no interpreter needed: the slot is already structured)."""
+    goal = slot.goal
+    step = {
+        "action": "move",
+        "robots": [slot.robot.name],
+        "destination": {"name": goal.name, "x": goal.x, "y": goal.y},
+        "task": slot.task or None,
+        "speed": None,
+    }
+    return {
+        "type": "I",
+        "valid": True,
+        "needs_user": False,
+        "question": None,
+        "steps": [step],
+        "reason": "schedule",
+    }
+
+
+def run_due_slots(moment: datetime.datetime) -> list:
+    """Start every enabled slot covering this moment that has not run on its date; return the instructions."""
+    from execution.instructions import submit
+
+    local = timezone.localtime(moment)
+    today, now = local.date(), local.time()
+    due = TimeSlot.objects.filter(enabled=True, start__lte=now, end__gt=now).exclude(last_run_on=today)
+    started = []
+    for slot in due.select_related("robot", "goal"):
+        claimed = TimeSlot.objects.filter(pk=slot.pk).exclude(last_run_on=today).update(last_run_on=today)
+        if claimed:
+            text = f"{slot_text(slot)} (schedule {slot.start:%H:%M}-{slot.end:%H:%M})"
+            started.append(submit(text, None, source="schedule", parse=slot_parse(slot)))
+    return started
+
+
+def expire_idle(now: datetime.datetime) -> None:
+    """Dialogs without an answer end; robots idle in ready past the idle timeout go offline."""
+    limits = {Robot.State.DIALOG: DIALOG_TIMEOUT, Robot.State.READY: settings.FLEET_IDLE_TIMEOUT_SECONDS}
+    events = {Robot.State.DIALOG: (Event.DONE, "no answer"), Robot.State.READY: (Event.IDLE_TIMEOUT, "idle")}
+    robots = Robot.objects.filter(state__in=list(limits)).annotate(last=Max("transitions__at"))
+    for robot in robots:
+        last = robot.last or robot.registered_at
+        if (now - last).total_seconds() > limits[robot.state]:
+            event, reason = events[robot.state]
+            states.transition(robot.pk, event, f"{reason} for {limits[robot.state]:.0f} s")
+
+
+def tick(clock: Clock) -> dict:
+    """One pass of the loop; return what it did (for logs and tests)."""
+    close_old_connections()
+    report = {"recovered": watchdog.recover(), "kicked": watchdog.kick_stalled()}
+    report["scheduled"] = [instruction.pk for instruction in run_due_slots(clock.now())]
+    expire_idle(timezone.now())
+    return report
+
+
+def loop(clock: Clock, period: float = 0.5, should_stop=lambda: False) -> None:
+    """Tick until should_stop() says so; one failing tick is logged, not fatal."""
+    while not should_stop():
+        started = time.monotonic()
+        try:
+            report = tick(clock)
+            if any(report.values()):
+                log.info("scheduler: %s", report)
+        except Exception:
+            log.exception("scheduler tick failed")
+        time.sleep(max(0.0, period - (time.monotonic() - started)))

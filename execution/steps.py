@@ -1,0 +1,267 @@
+"""One robot's steps, run through its link: move to a goal (own controller or its nav stack), then a task.
+
+A Session carries what the control loop needs each tick: the next pose from odometry, the stop and preempt
+flags, the lock renewal, and the timing stamps (first command published, motion seen in odometry).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import uuid
+from dataclasses import dataclass, field
+
+from django.utils import timezone
+
+import live
+from execution import coordination
+from execution.link import RobotLink
+from execution.models import Execution, Instruction
+from execution.route import route
+from fleetcore import motion
+from fleetcore.states import Event
+from robots import states
+
+ODOMETRY_TIMEOUT = 1.0  # s without an odometry message fails the step
+RENEW_EVERY = 0.5  # s between lock renewals (the lock lives LOCK_TTL_MS)
+MOVED, TURNED = 0.02, 0.05  # m, rad: motion seen in odometry
+
+
+class StepFailed(Exception):
+    """The step cannot finish; the message says why, for a person."""
+
+
+class Interrupted(Exception):
+    """Someone stopped or preempted the robot, or its lock was lost."""
+
+    def __init__(self, outcome: str, reason: str, preemptor: int | None = None) -> None:
+        super().__init__(reason)
+        self.outcome, self.reason, self.preemptor = outcome, reason, preemptor
+
+
+@dataclass
+class Session:
+    execution: Execution
+    link: RobotLink
+    lock: coordination.RobotLock
+    started: float = field(default_factory=time.time)
+    seen: int = 0
+    last_renew: float = field(default_factory=time.monotonic)
+    origin: tuple | None = None
+    commanded: bool = False
+    moving: bool = False
+
+    @property
+    def robot(self):
+        return self.link.robot
+
+    def pose(self) -> tuple[float, float, float]:
+        pose, self.seen = self.link.next_pose(self.seen, ODOMETRY_TIMEOUT)
+        if pose is None:
+            topic = self.link.odometry.target
+            raise StepFailed(f"{self.robot.name}: no odometry on {topic} for {ODOMETRY_TIMEOUT:g} s")
+        self._note_motion(pose)
+        return pose
+
+    def check(self) -> None:
+        """Raise Interrupted if the robot was stopped or preempted, or the lock was lost; renew it."""
+        if time.monotonic() - self.last_renew > RENEW_EVERY:
+            if not self.lock.renew():
+                raise Interrupted("failed", "lost the robot lock (another worker took over)")
+            self.last_renew = time.monotonic()
+            if self.link.poses.value is not None:
+                coordination.store_pose(self.robot.pk, self.link.poses.value)
+        stopped_at, preemptor = coordination.flags(self.robot.pk)
+        if stopped_at > self.started:
+            raise Interrupted("cancelled", "stopped")
+        if preemptor is not None and preemptor != self.execution.pk:
+            raise Interrupted("preempted", f"preempted by instruction of execution {preemptor}", preemptor)
+
+    def send(self, v: float, w: float) -> None:
+        """Publish a velocity command (after checking the flags, so a stop is never overridden)."""
+        self.check()
+        self.link.velocity(v, w)
+        self.mark_commanded()
+
+    def mark_commanded(self) -> None:
+        if not self.commanded:
+            self.commanded = True
+            _stamp(self.execution, "first_command_at")
+
+    def _note_motion(self, pose) -> None:
+        if self.origin is None:
+            self.origin = pose
+            return
+        if self.moving or not self.commanded:
+            return
+        moved = math.hypot(pose[0] - self.origin[0], pose[1] - self.origin[1])
+        if moved > MOVED or abs(motion.wrap(pose[2] - self.origin[2])) > TURNED:
+            self.moving = True
+            _stamp(self.execution, "motion_started_at")
+
+
+def _stamp(execution: Execution, field_name: str) -> None:
+    """Set a timing field on the execution and, the first time across robots, on its instruction."""
+    now = timezone.now()
+    Execution.objects.filter(pk=execution.pk, **{f"{field_name}__isnull": True}).update(**{field_name: now})
+    Instruction.objects.filter(pk=execution.instruction_id, **{f"{field_name}__isnull": True}).update(
+        **{field_name: now}
+    )
+
+
+class Blocked(StepFailed):
+    """The robot is commanded to move but does not: something the plan did not know stands in the way."""
+
+
+def drive(session: Session, controller, limit_s: float, blocked_s: float | None = None) -> None:
+    """Run a velocity controller tick by tick on odometry until it is done.
+
+    blocked_s: raise Blocked when the robot has not moved (2 cm, 3 degrees) for that long while commanded.
+    """
+    deadline = time.monotonic() + limit_s
+    still_since, still_pose = time.monotonic(), None
+    while True:
+        pose = session.pose()
+        command = controller.command(pose)
+        if command.done:
+            session.link.halt()
+            return
+        now = time.monotonic()
+        if now > deadline:
+            session.link.halt()
+            raise StepFailed(f"{session.robot.name}: did not finish within {limit_s:.0f} s")
+        if still_pose is None or _moved(still_pose, pose):
+            still_since, still_pose = now, pose
+        elif blocked_s is not None and now - still_since > blocked_s:
+            session.link.halt()
+            raise Blocked(f"{session.robot.name}: blocked near ({pose[0]:.1f}, {pose[1]:.1f})")
+        session.send(command.v, command.w)
+
+
+def _moved(before, after) -> bool:
+    return math.dist(before[:2], after[:2]) > 0.02 or abs(motion.wrap(after[2] - before[2])) > 0.05
+
+
+def navigate(session: Session, x: float, y: float, limit_s: float) -> None:
+    """Hand the goal to the robot's navigation stack and follow its status to the end."""
+    session.check()
+    goal = session.link.navigate(x, y, 0.0, f"fleet-{session.execution.pk}-{uuid.uuid4().hex[:8]}")
+    session.mark_commanded()
+    deadline = time.monotonic() + limit_s
+    try:
+        while True:
+            pose = session.pose()
+            session.check()
+            outcome = session.link.goal_outcome(goal, pose)
+            if outcome == "succeeded":
+                return
+            if outcome in ("failed", "cancelled"):
+                raise StepFailed(f"{session.robot.name}: the navigation stack reports the goal {outcome}")
+            if time.monotonic() > deadline:
+                raise StepFailed(f"{session.robot.name}: navigation did not arrive within {limit_s:.0f} s")
+    except BaseException:
+        session.link.halt(goal)
+        raise
+
+
+def travel_time(distance: float, turn: float, limits: motion.Limits, factor: float) -> float:
+    """A generous limit for a leg: three times the ideal time plus slack."""
+    return 3 * (distance / (limits.linear * factor) + turn / (limits.angular * factor)) + 10
+
+
+WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
+BLOCKED_S = 2.0  # s commanded without moving: something unplanned is in the way
+REROUTES, BACK_OFF_S = 2, 1.0
+
+
+def go_to(session: Session, destination: dict, factor: float) -> None:
+    x, y = float(destination["x"]), float(destination["y"])
+    name = destination.get("name") or f"({x:g}, {y:g})"
+    states.transition(session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id)
+    live.goal(session.robot, name, x, y)  # the map draws the goal until the robot is done with it
+    pose = session.pose()
+    limits = session.link.limits()
+    distance = math.hypot(x - pose[0], y - pose[1])
+    try:
+        if session.link.nav_kind:
+            nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
+            navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
+        else:
+            drive_route(session, (x, y), limits, factor)
+    finally:
+        live.goal(session.robot, None, None, None)
+
+
+def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> None:
+    """Drive a route leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal.
+
+    Blocked on the way (a robot that parked there after the plan was made), the robot backs off a little and
+    plans again from where it is, with the other robots' live poses, up to REROUTES times.
+    """
+    for attempt in range(REROUTES + 1):
+        pose = session.pose()
+        try:
+            for x, y in route(session.robot, pose[:2], goal):
+                pose = session.pose()
+                last_leg = (x, y) == goal
+                tolerance = motion.TOLERANCE if last_leg else WAYPOINT_TOLERANCE
+                controller = motion.GoToGoal((x, y), limits, factor, tolerance)
+                limit = travel_time(math.hypot(x - pose[0], y - pose[1]), math.pi, limits, factor)
+                drive(session, controller, limit, blocked_s=BLOCKED_S)
+            return
+        except Blocked:
+            if attempt == REROUTES:
+                raise
+            back_off(session, limits)
+
+
+def back_off(session: Session, limits: motion.Limits) -> None:
+    """Reverse slowly for a moment, to leave room to turn."""
+    until = time.monotonic() + BACK_OFF_S
+    while time.monotonic() < until:
+        session.send(-0.25 * limits.linear, 0.0)
+        session.pose()
+    session.link.halt()
+
+
+def do_task(session: Session, task: str, factor: float, where: str) -> None:
+    name, count = motion.parse_task(task)
+    states.transition(session.robot.pk, Event.WORK, f"{task} at {where}", session.execution.instruction_id)
+    pose = session.pose()
+    limits = session.link.limits()
+    controller = motion.task_controller(task, pose, limits, factor)
+    if name == "rotate":
+        limit = travel_time(0.0, 2 * math.pi * count, limits, factor)
+    else:
+        limit = travel_time(motion.CLEAN_SIZE * (motion.CLEAN_LANES + 2), 2 * math.pi * 3, limits, factor)
+    drive(session, controller, limit)
+
+
+def report(session: Session) -> str:
+    x, y, yaw = session.pose()
+    return f"{session.robot.name} is at ({x:.2f}, {y:.2f}), heading {math.degrees(yaw):.0f}°"
+
+
+def run_step(session: Session, step: dict) -> str:
+    """Run one step; return a few words on what was done."""
+    action = step.get("action") or ("move" if step.get("destination") else None)
+    if action == "report_position":
+        return report(session)
+    destination = step.get("destination")
+    if action == "dock":
+        x0, y0, _ = session.robot.start_pose or (0.0, 0.0, 0.0)
+        destination = {"name": "home", "x": x0, "y": y0}
+    if not destination and not step.get("task"):
+        raise StepFailed(f"{session.robot.name}: nothing to do for the action {action!r}")
+    factor = motion.speed_factor(step.get("speed"))
+    if destination:
+        go_to(session, destination, factor)
+    where = destination.get("name", "the goal") if destination else "its place"
+    if step.get("task"):
+        do_task(session, step["task"], factor, where)
+        return f"{step['task']} done at {where}"
+    return f"arrived at {where}"
+
+
+def advance(execution: Execution, index: int) -> None:
+    Execution.objects.filter(pk=execution.pk).update(step_index=index)

@@ -1,0 +1,281 @@
+"""The portal's pages: thin views that authorise, ask the domain and render.
+
+Live updates come over the page's WebSocket (fleet/consumers.py); actions go through the JSON API or the
+small POST views at the end of this module, which answer JSON to fetch() and redirect plain forms.
+"""
+
+import json
+
+from django.contrib import messages
+from django.core.exceptions import PermissionDenied
+from django.core.paginator import Paginator
+from django.http import JsonResponse
+from django.shortcuts import get_object_or_404, redirect, render
+from django.views.decorators.http import require_POST
+
+import live
+from access.roles import AUDIT_PERM, REGISTER_PERM
+from audit.models import AuditEntry
+from execution.models import Instruction, TimeSlot
+from places.models import Location, Map
+from portal.consumers import run_command
+from robots.models import Binding, RegistrationRecord, Robot
+
+DEMO_ENDPOINTS = ["ws://127.0.0.1:9090", "ws://127.0.0.1:9091", "ws://127.0.0.1:9092", "ws://127.0.0.1:9093"]
+TIMING_FIELDS = [
+    ("interpreted_at", "interpreted"),
+    ("dispatched_at", "dispatched"),
+    ("first_command_at", "first command"),
+    ("motion_started_at", "motion started"),
+    ("finished_at", "finished"),
+]
+
+
+def _wants_json(request) -> bool:
+    return (
+        "application/json" in request.headers.get("Accept", "") or request.content_type == "application/json"
+    )
+
+
+def _payload(request) -> dict:
+    if request.content_type == "application/json":
+        try:
+            data = json.loads(request.body or b"{}")
+        except ValueError:
+            return {}
+        return data if isinstance(data, dict) else {}
+    return request.POST.dict()
+
+
+def _get_robot_for_user(request, pk: int) -> Robot:
+    """The robot, if the user may see robots at all."""
+    if not request.user.has_perm("robots.view_robot"):
+        raise PermissionDenied("You may not view robots.")
+    return get_object_or_404(Robot, pk=pk)
+
+
+def _map_context() -> dict:
+    """The map the dashboard draws, its cells as one character each ('#' occupied, '?' unknown, '.' free)."""
+    grid = Map.objects.first()
+    if grid is None:
+        return {"map": None, "locations": []}
+    glyph = {True: "#", False: "."}
+    cells = "".join("?" if value < 0 else glyph[value >= 50] for value in grid.cells())
+    return {
+        "map": {
+            "name": grid.name,
+            "resolution": grid.resolution,
+            "width": grid.width,
+            "height": grid.height,
+            "origin": [grid.origin_x, grid.origin_y],
+            "cells": cells,
+        },
+        "locations": list(grid.locations.values("id", "name", "x", "y", "kind")),
+    }
+
+
+def dashboard(request):
+    """The fleet at a glance: live map, robots, instruction console."""
+    map_data = _map_context()
+    rows = live.robot_rows(Robot.objects.all())
+    context = {
+        "robots": rows,
+        "map_data": map_data,
+        "locations": map_data["locations"],
+        "instructions": Instruction.objects.select_related("user")[:10],
+    }
+    return render(request, "fleet/dashboard.html", context)
+
+
+def robot_list(request):
+    """Every robot with its link, state, current instruction and speed (live)."""
+    return render(request, "fleet/robot_list.html", {"robots": live.robot_rows(Robot.objects.all())})
+
+
+def robot_detail(request, pk: int):
+    """One robot: bindings and how each was found, its ROS graph, URDF facts, history, teleop and lease."""
+    robot = _get_robot_for_user(request, pk)
+    row = live.robot_rows([robot])[0]
+    context = {
+        "robot": robot,
+        "row": row,
+        "bindings": robot.bindings.all(),
+        "topics": robot.topics.all(),
+        "nodes": robot.nodes.all(),
+        "services": robot.services.all(),
+        "facts": sorted((robot.description or {}).items()),
+        "transitions": robot.transitions.select_related("instruction")[:30],
+        "holds_it": row["holder"] == request.user.username,
+    }
+    return render(request, "fleet/robot_detail.html", context)
+
+
+def registration(request):
+    """Register endpoints and resolve the bindings the engine was unsure of."""
+    context = {
+        "records": RegistrationRecord.objects.select_related("user")[:20],
+        "pending": Binding.objects.filter(needs_user=True).select_related("robot"),
+        "demo_endpoints": "\n".join(DEMO_ENDPOINTS),
+        "robots": Robot.objects.all(),
+    }
+    return render(request, "fleet/registration.html", context)
+
+
+@require_POST
+def choose_binding(request, pk: int):
+    """A person picks the topic or service for one action of one robot (a form, so it works without JS)."""
+    if not request.user.has_perm(REGISTER_PERM):
+        raise PermissionDenied("Only admins resolve bindings.")
+    binding = get_object_or_404(Binding.objects.select_related("robot"), pk=pk)
+    target = request.POST.get("target", "")
+    if target not in {candidate.get("target") for candidate in binding.candidates}:
+        messages.error(request, f"target: {target!r} is not one of the candidates for {binding}.")
+        return redirect("registration")
+    from robots.binding import choose
+
+    chosen = choose(binding.robot, binding.action, target, request.user)
+    messages.success(request, f"{chosen.robot.name}: {chosen.action} now uses {chosen.target}.")
+    return redirect("registration")
+
+
+def _schedule_columns(slots) -> list[tuple]:
+    return sorted({(slot.start, slot.end) for slot in slots})
+
+
+def schedules(request):
+    """Robots × time slots, the shape of the paper's Table 12; admins edit cells in place."""
+    slots = list(TimeSlot.objects.select_related("robot", "goal"))
+    columns = _schedule_columns(slots)
+    cells = {(slot.robot_id, slot.start, slot.end): slot for slot in slots}
+    rows = [
+        {"robot": robot, "cells": [(start, end, cells.get((robot.pk, start, end))) for start, end in columns]}
+        for robot in Robot.objects.all()
+    ]
+    context = {"columns": columns, "rows": rows, "goals": Location.objects.all()}
+    return render(request, "fleet/schedules.html", context)
+
+
+def _filtered_instructions(request):
+    rows = Instruction.objects.select_related("user").prefetch_related("robots")
+    filters = {key: request.GET.get(key, "").strip() for key in ("status", "type", "user", "robot", "q")}
+    lookups = {
+        "status": "status",
+        "type": "type",
+        "user": "user__username",
+        "robot": "robots__name",
+        "q": "text__icontains",
+    }
+    for key, lookup in lookups.items():
+        if filters[key]:
+            rows = rows.filter(**{lookup: filters[key]})
+    return rows.distinct(), filters
+
+
+def _timings(instruction) -> list[dict]:
+    """Each stage of an instruction with milliseconds since it was received."""
+    stages = []
+    for field, label in TIMING_FIELDS:
+        moment = getattr(instruction, field)
+        if moment is not None:
+            elapsed = (moment - instruction.received_at).total_seconds() * 1000
+            stages.append({"label": label, "at": moment, "ms": round(elapsed)})
+    return stages
+
+
+def history(request):
+    """Instructions, newest first, with filters and each instruction's timings."""
+    rows, filters = _filtered_instructions(request)
+    page = Paginator(rows, 25).get_page(request.GET.get("page"))
+    for instruction in page:
+        instruction.timings = _timings(instruction)
+    context = {
+        "page": page,
+        "filters": filters,
+        "statuses": Instruction.Status.choices,
+        "types": Instruction.Type.choices,
+        "robots": Robot.objects.values_list("name", flat=True),
+        "query": _query_without_page(request),
+    }
+    return render(request, "fleet/history.html", context)
+
+
+def _query_without_page(request) -> str:
+    query = request.GET.copy()
+    query.pop("page", None)
+    return query.urlencode()
+
+
+def audit(request):
+    """Who did what, when: for admins."""
+    if not request.user.has_perm(AUDIT_PERM):
+        raise PermissionDenied("Only admins see the audit trail.")
+    rows = AuditEntry.objects.select_related("user")
+    action, who = request.GET.get("action", "").strip(), request.GET.get("user", "").strip()
+    if action:
+        rows = rows.filter(action__startswith=action)
+    if who:
+        rows = rows.filter(user__username=who)
+    page = Paginator(rows, 50).get_page(request.GET.get("page"))
+    actions = AuditEntry.objects.order_by("action").values_list("action", flat=True).distinct()
+    context = {
+        "page": page,
+        "action": action,
+        "who": who,
+        "actions": actions,
+        "query": _query_without_page(request),
+    }
+    return render(request, "fleet/audit.html", context)
+
+
+def _answer(request, ok: bool, detail: str, status: int = 200, **extra):
+    """JSON for fetch(), a message and a redirect back for a plain form."""
+    if _wants_json(request):
+        return JsonResponse({"ok": ok, "detail": detail, **extra}, status=status)
+    (messages.success if ok else messages.error)(request, detail)
+    return redirect(request.META.get("HTTP_REFERER") or "dashboard")
+
+
+@require_POST
+def stop(request):
+    """The stop button: stop the given robots (or all) that this user may command."""
+    payload = _payload(request)
+    robots = payload.get("robots", "all")
+    if isinstance(robots, str) and robots != "all":
+        robots = [int(pk) for pk in robots.split(",") if pk.strip().isdigit()]
+    reply = run_command(request.user, {"command": "stop", "robots": robots})
+    return _answer(request, reply["ok"], reply["detail"], 200 if reply["ok"] else 403)
+
+
+@require_POST
+def teleop(request, pk: int):
+    """Drive a robot at the given speeds (the robot page's buttons, without a WebSocket)."""
+    payload = _payload(request)
+    content = {"command": "teleop", "robot": pk}
+    for field in ("linear", "angular"):
+        try:
+            content[field] = float(payload.get(field, 0.0))
+        except (TypeError, ValueError):
+            return _answer(request, False, f"{field}: must be a number", 422)
+    reply = run_command(request.user, content)
+    return _answer(request, reply["ok"], reply["detail"], 200 if reply["ok"] else 403)
+
+
+@require_POST
+def lease(request, pk: int):
+    """Take, renew or release control of a robot; everyone sees who holds it."""
+    from access import leases
+
+    robot = _get_robot_for_user(request, pk)
+    action = _payload(request).get("action", "take")
+    try:
+        if action == "release":
+            leases.release(request.user, robot)
+        elif action == "take":
+            leases.take(request.user, robot)
+        else:
+            return _answer(request, False, "action: must be take or release", 422)
+    except leases.ControlRefused as exc:
+        return _answer(request, False, str(exc), 403)
+    held_by = leases.holder(robot)
+    detail = f"{robot.name} is held by {held_by.username}." if held_by else f"{robot.name} is free."
+    return _answer(request, True, detail, holder=held_by.username if held_by else None)

@@ -1,0 +1,274 @@
+"""Live poses: each robot's odometry (and amcl pose) becomes a map pose, coalesced, pushed at up to 10 Hz.
+
+A robot's map pose is its odometry composed with its start pose (the odometry origin on the map); once an
+amcl pose arrives, the map->odom offset is corrected from it, so later odometry stays on the map.
+
+How the link process (``manage.py robotlinks``) drives it::
+
+    hub = PoseHub()                                   # one per process, in its event loop
+    manager = LinkManager(hooks=[link_hook(hub)])     # subscribes odometry (and amcl pose) per robot
+    await asyncio.gather(manager.run(), hub.run(stop)) # one batched "robots.poses" message per tick
+
+Callbacks take the decoded ROS message (a dict) and may be called from any thread. ``link_hook(hub)`` does
+the subscribing on the links process's own rosbridge links; without a link process, ``follow(robots, hub,
+stop)`` opens one link per endpoint itself.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import threading
+import time
+from collections import defaultdict
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+
+import live
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RATE_HZ = 10.0
+Pose2D = tuple[float, float, float]
+
+
+def yaw_of(quaternion: dict) -> float:
+    """The yaw (rotation about z) of a geometry_msgs/Quaternion."""
+    x, y, z, w = (float(quaternion.get(key, 0.0) or 0.0) for key in ("x", "y", "z", "w"))
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def compose(a: Pose2D, b: Pose2D) -> Pose2D:
+    """The pose b expressed in a's parent frame (a ∘ b)."""
+    ax, ay, ayaw = a
+    bx, by, byaw = b
+    cos, sin = math.cos(ayaw), math.sin(ayaw)
+    return (ax + cos * bx - sin * by, ay + sin * bx + cos * by, _wrap(ayaw + byaw))
+
+
+def inverse(a: Pose2D) -> Pose2D:
+    """The inverse transform of a."""
+    x, y, yaw = a
+    cos, sin = math.cos(yaw), math.sin(yaw)
+    return (-cos * x - sin * y, sin * x - cos * y, _wrap(-yaw))
+
+
+def _wrap(angle: float) -> float:
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+def pose_of(message: dict) -> Pose2D:
+    """(x, y, yaw) of an Odometry or PoseWithCovarianceStamped message (both carry pose.pose)."""
+    pose = message["pose"]["pose"]
+    position = pose["position"]
+    return (float(position["x"]), float(position["y"]), yaw_of(pose["orientation"]))
+
+
+def twist_of(message: dict) -> tuple[float, float]:
+    """(linear x, angular z) of an Odometry message; zeros when it carries no twist."""
+    twist = (message.get("twist") or {}).get("twist") or {}
+    linear = (twist.get("linear") or {}).get("x", 0.0) or 0.0
+    angular = (twist.get("angular") or {}).get("z", 0.0) or 0.0
+    return float(linear), float(angular)
+
+
+def start_offset(start_pose) -> Pose2D:
+    """The map->odom offset a robot starts with: its start_pose, or the origin when unknown."""
+    if isinstance(start_pose, list | tuple) and len(start_pose) >= 2:
+        yaw = float(start_pose[2]) if len(start_pose) > 2 else 0.0
+        return (float(start_pose[0]), float(start_pose[1]), yaw)
+    return (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Subscription:
+    """One topic a link should subscribe for the hub, with the callback that takes its messages."""
+
+    robot_id: int
+    topic: str
+    msg_type: str
+    callback: Callable[[dict], None]
+    throttle_rate: int  # milliseconds, as rosbridge's subscribe op takes it
+    queue_length: int = 1
+
+
+async def publish_to_channels(batch: list[live.RobotPose]) -> None:
+    """Send one tick of poses to the browsers and keep the latest per robot for new subscribers' snapshots."""
+    from asgiref.sync import sync_to_async
+    from channels.layers import get_channel_layer
+    from django.core.cache import cache
+
+    layer = get_channel_layer()
+    if layer is not None:
+        await layer.group_send(live.POSES_GROUP, live.poses(batch))
+    latest = {live.POSE_CACHE_KEY.format(id=pose["id"]): pose for pose in batch}
+    await sync_to_async(cache.set_many)(latest, timeout=60)
+
+
+class PoseHub:
+    """Latest pose per robot, flushed as one batch per tick: bursts of odometry cost one message."""
+
+    def __init__(
+        self,
+        publish: Callable[[list[live.RobotPose]], Awaitable[None]] = publish_to_channels,
+        rate_hz: float = DEFAULT_RATE_HZ,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        if not 0 < rate_hz <= 50:
+            raise ValueError(f"rate_hz: must be in (0, 50], got {rate_hz}")
+        self.publish = publish
+        self.period = 1.0 / rate_hz
+        self.clock = clock
+        self._lock = threading.Lock()
+        self._offsets: dict[int, Pose2D] = {}
+        self._raw_odometry: dict[int, Pose2D] = {}
+        self._latest: dict[int, live.RobotPose] = {}
+        self._dirty: set[int] = set()
+
+    def track(self, robot_id: int, start_pose=None) -> None:
+        """Start (or restart) following a robot from its start pose."""
+        with self._lock:
+            self._offsets[robot_id] = start_offset(start_pose)
+
+    def forget(self, robot_id: int) -> None:
+        with self._lock:
+            for table in (self._offsets, self._raw_odometry, self._latest):
+                table.pop(robot_id, None)
+            self._dirty.discard(robot_id)
+
+    def subscriptions(self, robot) -> list[Subscription]:
+        """What to subscribe for one robot: its bound odometry, and its amcl pose when bound."""
+        self.track(robot.pk, robot.start_pose)
+        bindings = {binding.action: binding for binding in robot.bindings.all() if binding.target}
+        throttle = int(self.period * 1000)
+        subs = []
+        if "odometry" in bindings:
+            odom = bindings["odometry"]
+            callback = self._callback(self.on_odometry, robot.pk)
+            subs.append(Subscription(robot.pk, odom.target, odom.message_type, callback, throttle))
+        if "pose" in bindings:
+            pose = bindings["pose"]
+            callback = self._callback(self.on_amcl, robot.pk)
+            subs.append(Subscription(robot.pk, pose.target, pose.message_type, callback, 0))
+        return subs
+
+    @staticmethod
+    def _callback(handler, robot_id: int) -> Callable[[dict], None]:
+        def callback(message: dict) -> None:
+            try:
+                handler(robot_id, message)
+            except (KeyError, TypeError, ValueError) as exc:
+                log.warning("robot %s: unreadable pose message dropped (%s)", robot_id, exc)
+
+        return callback
+
+    def on_odometry(self, robot_id: int, message: dict) -> None:
+        """Take one nav_msgs/Odometry: compose with the robot's offset and keep it as the latest."""
+        raw = pose_of(message)
+        linear, angular = twist_of(message)
+        with self._lock:
+            self._raw_odometry[robot_id] = raw
+            offset = self._offsets.setdefault(robot_id, (0.0, 0.0, 0.0))
+            x, y, yaw = compose(offset, raw)
+            self._latest[robot_id] = live.RobotPose(
+                id=robot_id, x=round(x, 3), y=round(y, 3), yaw=round(yaw, 3),
+                v=round(linear, 3), w=round(angular, 3), t=self.clock(),
+            )  # fmt: skip
+            self._dirty.add(robot_id)
+
+    def on_amcl(self, robot_id: int, message: dict) -> None:
+        """Take an amcl pose (map frame): correct the map->odom offset so odometry lands where amcl says."""
+        in_map = pose_of(message)
+        with self._lock:
+            raw = self._raw_odometry.get(robot_id)
+            self._offsets[robot_id] = compose(in_map, inverse(raw)) if raw else in_map
+            previous = self._latest.get(robot_id, {})
+            self._latest[robot_id] = live.RobotPose(
+                id=robot_id, x=round(in_map[0], 3), y=round(in_map[1], 3), yaw=round(in_map[2], 3),
+                v=previous.get("v", 0.0), w=previous.get("w", 0.0), t=self.clock(),
+            )  # fmt: skip
+            self._dirty.add(robot_id)
+
+    def take_batch(self) -> list[live.RobotPose]:
+        """The poses that changed since the last tick (each robot once), and start a new tick."""
+        with self._lock:
+            batch = [self._latest[robot_id] for robot_id in sorted(self._dirty)]
+            self._dirty.clear()
+        return batch
+
+    async def flush(self) -> int:
+        """Publish one tick; return how many robots it carried."""
+        batch = self.take_batch()
+        if batch:
+            try:
+                await self.publish(batch)
+            except Exception:  # a hiccup of Redis must not end the stream
+                log.exception("pose batch of %d robots not published", len(batch))
+        return len(batch)
+
+    async def run(self, stop: asyncio.Event | None = None) -> None:
+        """Flush once per tick until stopped (a steady clock, so a slow tick does not drift the rate)."""
+        stop = stop or asyncio.Event()
+        loop = asyncio.get_running_loop()
+        next_tick = loop.time()
+        while not stop.is_set():
+            await self.flush()
+            next_tick += self.period
+            delay = next_tick - loop.time()
+            if delay < 0:
+                next_tick, delay = loop.time(), 0
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), timeout=delay)
+        await self.flush()
+
+
+async def subscribe_all(client, subs: list[Subscription]) -> None:
+    """Subscribe the hub's topics on a rosbridge link (robots.rosbridge renews them after a reconnection)."""
+    for sub in subs:
+        await client.subscribe(
+            sub.topic,
+            sub.msg_type,
+            sub.callback,
+            throttle_rate=sub.throttle_rate,
+            queue_length=sub.queue_length,
+        )
+
+
+async def stream_endpoint(url: str, subs: list[Subscription], stop: asyncio.Event) -> None:
+    """Follow the given topics on one endpoint until stopped, on a link of its own that reconnects by itself."""
+    from robots.rosbridge.client import RosbridgeClient
+
+    client = RosbridgeClient(url, reconnect=True)
+    await client.start()
+    try:
+        await subscribe_all(client, subs)
+        await stop.wait()
+    finally:
+        await client.close()
+
+
+def link_hook(hub: PoseHub):
+    """A robots.links hook: on each endpoint's link, subscribe every robot's poses for the hub."""
+    from asgiref.sync import sync_to_async
+
+    from robots.models import Robot
+
+    def robots_of(url: str) -> list:
+        return list(Robot.objects.filter(endpoint=url).prefetch_related("bindings"))
+
+    async def hook(client, _robots) -> None:
+        for robot in await sync_to_async(robots_of)(client.url):
+            await subscribe_all(client, await sync_to_async(hub.subscriptions)(robot))
+
+    return hook
+
+
+async def follow(robots, hub: PoseHub, stop: asyncio.Event) -> None:
+    """Stream the poses of these robots (bindings prefetched) until stopped: one socket per endpoint."""
+    per_endpoint: dict[str, list[Subscription]] = defaultdict(list)
+    for robot in robots:
+        per_endpoint[robot.endpoint].extend(hub.subscriptions(robot))
+    tasks = [stream_endpoint(url, subs, stop) for url, subs in per_endpoint.items() if subs]
+    await asyncio.gather(hub.run(stop), *tasks)
