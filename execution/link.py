@@ -13,7 +13,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from fleetcore import motion
+from fleetcore import geometry, motion
 from robots.models import Binding, Robot
 
 NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE = "move_base", "nav2", "simple"
@@ -157,16 +157,16 @@ class RobotLink:
 
     # ----- poses -----
     def _on_odom(self, msg: dict) -> None:
-        self.local = motion.pose_of(msg)
-        self.poses.put(motion.compose(self.start, self.local))
+        self.local = geometry.pose_of(msg)
+        self.poses.put(geometry.compose(self.start, self.local))
 
     def _on_amcl(self, msg: dict) -> None:
         """Move the odometry origin so that the current odometry pose lands on the amcl estimate."""
         if self.local is None:
             return
-        ax, ay, ayaw = motion.pose_of(msg)
+        ax, ay, ayaw = geometry.pose_of(msg)
         lx, ly, lyaw = self.local
-        yaw0 = motion.wrap(ayaw - lyaw)
+        yaw0 = geometry.wrap(ayaw - lyaw)
         c, s = math.cos(yaw0), math.sin(yaw0)
         self.start = (ax - (c * lx - s * ly), ay - (s * lx + c * ly), yaw0)
 

@@ -18,7 +18,7 @@ from execution import coordination
 from execution.link import RobotLink
 from execution.models import Execution, Instruction
 from execution.route import route
-from fleetcore import motion
+from fleetcore import geometry, motion
 from fleetcore.states import Event
 from robots import states
 
@@ -95,7 +95,7 @@ class Session:
         if self.moving or not self.commanded:
             return
         moved = math.hypot(pose[0] - self.origin[0], pose[1] - self.origin[1])
-        if moved > MOVED or abs(motion.wrap(pose[2] - self.origin[2])) > TURNED:
+        if moved > MOVED or abs(geometry.wrap(pose[2] - self.origin[2])) > TURNED:
             self.moving = True
             _stamp(self.execution, "motion_started_at")
 
@@ -139,7 +139,7 @@ def drive(session: Session, controller, limit_s: float, blocked_s: float | None 
 
 
 def _moved(before, after) -> bool:
-    return math.dist(before[:2], after[:2]) > 0.02 or abs(motion.wrap(after[2] - before[2])) > 0.05
+    return math.dist(before[:2], after[:2]) > 0.02 or abs(geometry.wrap(after[2] - before[2])) > 0.05
 
 
 def navigate(session: Session, x: float, y: float, limit_s: float) -> None:

@@ -12,6 +12,8 @@ import math
 import re
 from dataclasses import dataclass, field
 
+from fleetcore.geometry import quaternion, wrap
+
 # Speed words as a fraction of each robot's own limits.
 SPEED_FACTORS = {None: 0.6, "": 0.6, "slowly": 0.3, "fast": 0.85, "very fast": 1.0}
 TOLERANCE = 0.1  # metres: arrived when this close to the goal
@@ -52,49 +54,8 @@ def speed_factor(word: str | None) -> float:
     return SPEED_FACTORS[key]
 
 
-def wrap(angle: float) -> float:
-    """The angle in (-pi, pi]."""
-    return math.atan2(math.sin(angle), math.cos(angle))
-
-
 def clamp(value: float, limit: float) -> float:
     return max(-limit, min(limit, value))
-
-
-def yaw_of(q: dict) -> float:
-    """The yaw of a geometry_msgs/Quaternion dict (identity when all zero)."""
-    x, y, z, w = (float(q.get(k, 0.0)) for k in ("x", "y", "z", "w"))
-    if x == y == z == w == 0.0:
-        return 0.0
-    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-
-
-def quaternion(yaw: float) -> dict:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
-
-
-def compose(
-    start: tuple[float, float, float], local: tuple[float, float, float]
-) -> tuple[float, float, float]:
-    """The map pose of an odometry pose, given the map pose of the odometry origin."""
-    x0, y0, yaw0 = start
-    x, y, yaw = local
-    c, s = math.cos(yaw0), math.sin(yaw0)
-    return x0 + c * x - s * y, y0 + s * x + c * y, wrap(yaw0 + yaw)
-
-
-def pose_of(msg: dict) -> tuple[float, float, float]:
-    """(x, y, yaw) of an Odometry or PoseWithCovarianceStamped (both carry pose.pose) or a PoseStamped."""
-    pose = msg.get("pose", {})
-    pose = pose.get("pose", pose) if isinstance(pose, dict) else {}
-    position = pose.get("position", {})
-    return float(position.get("x", 0.0)), float(position.get("y", 0.0)), yaw_of(pose.get("orientation", {}))
-
-
-def map_pose(odometry: dict, start_pose) -> tuple[float, float, float]:
-    """A robot's map pose from an Odometry message and its start pose ([x, y, yaw]; empty means the origin)."""
-    start = tuple(start_pose) if start_pose else (0.0, 0.0, 0.0)
-    return compose(start, pose_of(odometry))
 
 
 @dataclass

@@ -26,6 +26,7 @@ import re
 from dataclasses import dataclass, field
 from urllib.parse import urlparse
 
+from fleetcore import geometry
 from robots import urdf
 from robots.rosbridge import RosbridgeClient, RosbridgeError, ServiceError
 
@@ -376,8 +377,5 @@ def _pose_from_params(graph: Graph) -> tuple[list[float], str] | None:
 
 
 def _pose_of(pose: dict) -> list[float]:
-    import math
-
-    p, q = pose["position"], pose["orientation"]
-    yaw = math.atan2(2 * (q["w"] * q["z"] + q["x"] * q["y"]), 1 - 2 * (q["y"] ** 2 + q["z"] ** 2))
-    return [float(p["x"]), float(p["y"]), round(yaw, 6)]
+    x, y, yaw = geometry.pose_of(pose)
+    return [x, y, round(yaw, 6)]

@@ -19,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import threading
 import time
 from collections import defaultdict
@@ -27,59 +26,11 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
 import live
+from fleetcore.geometry import Pose2D, compose, inverse, pose_of, start_offset, twist_of
 
 log = logging.getLogger(__name__)
 
 DEFAULT_RATE_HZ = 10.0
-Pose2D = tuple[float, float, float]
-
-
-def yaw_of(quaternion: dict) -> float:
-    """The yaw (rotation about z) of a geometry_msgs/Quaternion."""
-    x, y, z, w = (float(quaternion.get(key, 0.0) or 0.0) for key in ("x", "y", "z", "w"))
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def compose(a: Pose2D, b: Pose2D) -> Pose2D:
-    """The pose b expressed in a's parent frame (a ∘ b)."""
-    ax, ay, ayaw = a
-    bx, by, byaw = b
-    cos, sin = math.cos(ayaw), math.sin(ayaw)
-    return (ax + cos * bx - sin * by, ay + sin * bx + cos * by, _wrap(ayaw + byaw))
-
-
-def inverse(a: Pose2D) -> Pose2D:
-    """The inverse transform of a."""
-    x, y, yaw = a
-    cos, sin = math.cos(yaw), math.sin(yaw)
-    return (-cos * x - sin * y, sin * x - cos * y, _wrap(-yaw))
-
-
-def _wrap(angle: float) -> float:
-    return math.atan2(math.sin(angle), math.cos(angle))
-
-
-def pose_of(message: dict) -> Pose2D:
-    """(x, y, yaw) of an Odometry or PoseWithCovarianceStamped message (both carry pose.pose)."""
-    pose = message["pose"]["pose"]
-    position = pose["position"]
-    return (float(position["x"]), float(position["y"]), yaw_of(pose["orientation"]))
-
-
-def twist_of(message: dict) -> tuple[float, float]:
-    """(linear x, angular z) of an Odometry message; zeros when it carries no twist."""
-    twist = (message.get("twist") or {}).get("twist") or {}
-    linear = (twist.get("linear") or {}).get("x", 0.0) or 0.0
-    angular = (twist.get("angular") or {}).get("z", 0.0) or 0.0
-    return float(linear), float(angular)
-
-
-def start_offset(start_pose) -> Pose2D:
-    """The map->odom offset a robot starts with: its start_pose, or the origin when unknown."""
-    if isinstance(start_pose, list | tuple) and len(start_pose) >= 2:
-        yaw = float(start_pose[2]) if len(start_pose) > 2 else 0.0
-        return (float(start_pose[0]), float(start_pose[1]), yaw)
-    return (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)

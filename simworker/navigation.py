@@ -8,6 +8,7 @@ import itertools
 import math
 from collections.abc import Callable
 
+from fleetcore.geometry import wrap
 from fleetcore.planning import Planner
 
 XY_TOLERANCE = 0.15
@@ -17,10 +18,6 @@ MAX_REPLANS = 2  # replans around other robots before a stuck goal is aborted
 BACKUP_SECONDS, BACKUP_SPEED = 1.5, -0.1  # the recovery before a replan: back away at 0.1 m/s
 LOCAL_COSTMAP_M = 3.0  # robots closer than this are seen (the local costmap's size)
 ACTIVE, PREEMPTED, SUCCEEDED, ABORTED = 1, 2, 3, 4  # actionlib_msgs/GoalStatus
-
-
-def _wrap(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
 
 
 class Navigator:
@@ -86,7 +83,7 @@ class Navigator:
             self._align(yaw)
             return
         self._check_stuck(dist + len(self.path))
-        err = _wrap(math.atan2(ty - y, tx - x) - yaw)
+        err = wrap(math.atan2(ty - y, tx - x) - yaw)
         w = max(-p.nav_turn, min(p.nav_turn, 2.0 * err))
         if abs(err) > 0.6:
             self.robot.drive(0.0, w)
@@ -96,11 +93,11 @@ class Navigator:
 
     def _align(self, yaw: float) -> None:
         target = self.goal[2]
-        if target is None or abs(_wrap(target - yaw)) < YAW_TOLERANCE:
+        if target is None or abs(wrap(target - yaw)) < YAW_TOLERANCE:
             self.stop(SUCCEEDED, "Goal reached.")
             return
         turn = self.robot.profile.nav_turn
-        self.robot.drive(0.0, max(-turn, min(turn, 1.5 * _wrap(target - yaw))))
+        self.robot.drive(0.0, max(-turn, min(turn, 1.5 * wrap(target - yaw))))
 
     def _check_stuck(self, measure: float) -> None:
         best, since = self.progress

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import json
-import math
 import time
 
+from fleetcore.geometry import pose_msg, yaw_of
 from fleetcore.planning import Planner
 from simworker.graph import ServiceError
 from simworker.navigation import ABORTED, ACTIVE, PREEMPTED, SUCCEEDED, Navigator
-from simworker.robot import SimRobot, number, yaw_of
+from simworker.robot import SimRobot, number
 from simworker.server import ActionGoal
 
 NAV2_STATUS = {SUCCEEDED: 4, ABORTED: 6, PREEMPTED: 5}  # actionlib -> action_msgs/GoalStatus
@@ -26,13 +26,6 @@ def pose_of(msg: dict) -> tuple[float, float, float | None]:
     ori = msg.get("orientation")
     yaw = yaw_of(ori) if isinstance(ori, dict) and any(ori.get(k) for k in ("x", "y", "z")) else None
     return number(pos.get("x", 0.0)), number(pos.get("y", 0.0)), yaw
-
-
-def pose_msg(x: float, y: float, yaw: float) -> dict:
-    return {
-        "position": {"x": x, "y": y, "z": 0.0},
-        "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)},
-    }
 
 
 class NavStack:

@@ -32,14 +32,6 @@ def vector(msg: dict, key: str) -> tuple[float, float, float]:
     return number(vec.get("x", 0.0)), number(vec.get("y", 0.0)), number(vec.get("z", 0.0))
 
 
-def yaw_of(orientation: dict) -> float:
-    """Return the yaw of a geometry_msgs/Quaternion dict (identity when all zero)."""
-    qx, qy, qz, qw = (number(orientation.get(k, 0.0)) for k in ("x", "y", "z", "w"))
-    if qx == qy == qz == qw == 0.0:
-        return 0.0
-    return math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-
-
 class SimRobot:
     """Glue between a physics body and the rosbridge endpoint that shows the robot."""
 

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fleetcore import motion
+from fleetcore import geometry, motion
 from fleetcore.motion import GoToGoal, Limits, Rotate
 
 TB3 = Limits(0.22, 2.84)
@@ -23,7 +23,7 @@ def simulate(controller, pose, dt=0.05, steps=4000):
             return (x, y, yaw), commands
         x += command.v * math.cos(yaw) * dt
         y += command.v * math.sin(yaw) * dt
-        yaw = motion.wrap(yaw + command.w * dt)
+        yaw = geometry.wrap(yaw + command.w * dt)
     raise AssertionError("controller did not finish")
 
 
@@ -66,7 +66,7 @@ def test_clean_covers_the_square_around_the_location():
             break
         x += command.v * math.cos(yaw) * dt
         y += command.v * math.sin(yaw) * dt
-        yaw = motion.wrap(yaw + command.w * dt)
+        yaw = geometry.wrap(yaw + command.w * dt)
         visited.append((x, y))
     else:
         raise AssertionError("clean did not finish")
@@ -102,10 +102,10 @@ def test_limits_must_be_positive():
 
 
 def test_map_pose_is_odometry_composed_with_start_pose():
-    odom = {"pose": {"pose": {"position": {"x": 1.0, "y": 0.0}, "orientation": motion.quaternion(0.0)}}}
-    x, y, yaw = motion.map_pose(odom, [2.0, 1.0, math.pi / 2])
+    odom = {"pose": {"pose": {"position": {"x": 1.0, "y": 0.0}, "orientation": geometry.quaternion(0.0)}}}
+    x, y, yaw = geometry.map_pose(odom, [2.0, 1.0, math.pi / 2])
     assert (x, y, yaw) == pytest.approx((2.0, 2.0, math.pi / 2))
-    assert motion.map_pose(odom, []) == pytest.approx((1.0, 0.0, 0.0))
+    assert geometry.map_pose(odom, []) == pytest.approx((1.0, 0.0, 0.0))
 
 
 def test_velocity_messages_per_type_and_ros_version():

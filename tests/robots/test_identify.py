@@ -8,7 +8,9 @@ import yaml
 from robots.discovery import Graph, TopicInfo
 from robots.identify import Vocabulary, identify
 
-PROFILES = yaml.safe_load(Path(__file__).resolve().parents[1] / "data" / "robot_profiles.yaml".read_text())["robots"]
+PROFILES = yaml.safe_load((Path(__file__).resolve().parents[1] / "data" / "robot_profiles.yaml").read_text())[
+    "robots"
+]
 TWIST, ODOM = "geometry_msgs/Twist", "nav_msgs/Odometry"
 
 

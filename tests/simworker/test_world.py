@@ -3,11 +3,11 @@
 import math
 
 import pytest
-from fleetcore.worlds.make_paper_map import build
 
 from fleetcore.catalog import model
 from fleetcore.planning import Planner
 from fleetcore.world import WorldFormatError, load_world
+from fleetcore.worlds.make_paper_map import build
 
 
 @pytest.fixture(scope="module")
