@@ -9,13 +9,11 @@ small coverage pattern around the location. A robot's map pose is its odometry c
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field
 
 from fleetcore.geometry import quaternion, wrap
+from fleetcore.steps import DEFAULT_SPEED, SPEEDS, parse_task
 
-# Speed words as a fraction of each robot's own limits.
-SPEED_FACTORS = {None: 0.6, "": 0.6, "slowly": 0.3, "fast": 0.85, "very fast": 1.0}
 TOLERANCE = 0.1  # metres: arrived when this close to the goal
 TURN_FIRST = 0.5  # rad: turn on the spot while the heading error is larger than this
 K_ANGULAR, K_LINEAR = 2.5, 1.2
@@ -46,14 +44,6 @@ class Command:
 STOP = Command(0.0, 0.0, True)
 
 
-def speed_factor(word: str | None) -> float:
-    """The fraction of the limits a speed word asks for; ValueError for an unknown word."""
-    key = word.strip().lower() if isinstance(word, str) else word
-    if key not in SPEED_FACTORS:
-        raise ValueError(f"unknown speed {word!r}; use one of slowly, fast, very fast")
-    return SPEED_FACTORS[key]
-
-
 def clamp(value: float, limit: float) -> float:
     return max(-limit, min(limit, value))
 
@@ -64,7 +54,7 @@ class GoToGoal:
 
     goal: tuple[float, float]
     limits: Limits
-    factor: float = SPEED_FACTORS[None]
+    factor: float = SPEEDS[DEFAULT_SPEED]
     tolerance: float = TOLERANCE
 
     def command(self, pose: tuple[float, float, float]) -> Command:
@@ -93,7 +83,7 @@ class Rotate:
 
     turns: float
     limits: Limits
-    factor: float = SPEED_FACTORS[None]
+    factor: float = SPEEDS[DEFAULT_SPEED]
     turned: float = 0.0
     _last: float | None = None
 
@@ -131,7 +121,7 @@ class Clean:
 
     center: tuple[float, float]
     limits: Limits
-    factor: float = SPEED_FACTORS[None]
+    factor: float = SPEEDS[DEFAULT_SPEED]
     legs: list[tuple[float, float]] = field(default_factory=list)
 
     def __post_init__(self):
@@ -144,25 +134,6 @@ class Clean:
                 return command
             self.legs.pop(0)
         return STOP
-
-
-TASK_PATTERN = re.compile(r"^\s*(rotate|clean)\s*(?:\(\s*(\d+(?:\.\d+)?)\s*\))?\s*$", re.IGNORECASE)
-
-
-def parse_task(task: str) -> tuple[str, float | None]:
-    """("rotate", n) or ("clean", None) from "rotate(5)" or "clean"; ValueError for anything else."""
-    match = TASK_PATTERN.match(task or "")
-    if not match:
-        raise ValueError(f"unknown task {task!r}; known tasks: rotate(n), clean")
-    name, count = match.group(1).lower(), match.group(2)
-    if name == "rotate":
-        turns = float(count) if count is not None else 1.0
-        if turns <= 0 or turns > 100:
-            raise ValueError(f"rotate(n) needs 0 < n <= 100, got {turns}")
-        return name, turns
-    if count is not None:
-        raise ValueError("clean takes no count")
-    return name, None
 
 
 def task_controller(task: str, pose, limits: Limits, factor: float):

@@ -78,20 +78,6 @@ def can(state: str, event: str) -> bool:
     return True
 
 
-def step_priority(step: dict) -> int:
-    """The priority of one interpreter step: a task is work, a destination is motion, else dialog."""
-    if step.get("task"):
-        return PRIORITY[S.WORK]
-    if step.get("destination"):
-        return PRIORITY[S.MOTION]
-    return PRIORITY[S.DIALOG]
-
-
-def activity_priority(steps: list[dict]) -> int:
-    """The priority of an instruction for one robot: the highest of its steps (0 when it has none)."""
-    return max((step_priority(step) for step in steps), default=PRIORITY[S.READY])
-
-
 class Admission(StrEnum):
     START = "start"  # the robot is ready: run now
     PREEMPT = "preempt"  # interrupt the robot's lower-priority activity

@@ -17,8 +17,7 @@ from interpreter.terms import Terms, class_ancestry
 
 WORD_RE = re.compile(r"[^\W_]+(?:['’_][^\W_]+)*|\d+(?:\.\d+)?")
 
-SPEED_FACTORS = {"very slow": 0.25, "slow": 0.5, "normal": 0.7, "fast": 0.85, "very fast": 1.0}
-
+# The phrases of each speed word of the step contract (fleetcore.steps.SPEEDS): one key each, no more.
 _SPEED_PHRASES = {
     "very slow": "very slowly|very slow|really slowly|extremely slowly|at a crawl",
     "slow": "slowly|slow|carefully|gently|cautiously|slower",

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from urllib.parse import urlparse
 
 from fleetcore import geometry
+from fleetcore.bindings import norm_type
 from robots import urdf
 from robots.rosbridge import RosbridgeClient, RosbridgeError, ServiceError
 
@@ -47,11 +48,6 @@ INFRA_PARAMS = {"/rosdistro", "/rosversion", "/run_id"}
 WANTED_PARAMS = re.compile(r"robot_description$|max_vel|initial_pose|initialpose")
 VELOCITY_TYPES = {"geometry_msgs/Twist", "geometry_msgs/TwistStamped"}
 ROS1_ACTION_PARTS = ("goal", "cancel", "status", "result", "feedback")
-
-
-def norm_type(type_: str) -> str:
-    """Spell a type as ROS 1 does (`pkg/msg/Type` -> `pkg/Type`)."""
-    return type_.replace("/msg/", "/").replace("/srv/", "/").replace("/action/", "/")
 
 
 def is_infra(name: str, kind: str = "topic") -> bool:
