@@ -124,13 +124,3 @@ def flags(robot_id: int) -> tuple[float, int | None]:
     """(time of the last stop or 0, the execution id that preempts this robot or None), in one round trip."""
     stop, preempt = connection().mget(key("stop", robot_id), key("preempt", robot_id))
     return (float(stop) if stop else 0.0), (int(preempt) if preempt else None)
-
-
-def store_pose(robot_id: int, pose: tuple[float, float, float]) -> None:
-    connection().hset(key("poses"), robot_id, "{:.3f},{:.3f},{:.4f}".format(*pose))
-
-
-def last_poses() -> dict[int, tuple[float, float, float]]:
-    """The last map pose each robot's runner saw."""
-    raw = connection().hgetall(key("poses"))
-    return {int(k): tuple(float(v) for v in value.decode().split(",")) for k, value in raw.items()}

@@ -20,14 +20,18 @@ from django.conf import settings
 from django.db import connections, transaction
 from django.utils import timezone
 
+from access import leases
 from access.leases import ControlRefused, check_command
 from execution import coordination
 from execution.models import Execution, Instruction, TimeSlot
 from fleetcore import states as statemachine
+from fleetcore import steps as step_contract
 from fleetcore.states import Admission, Event
-from robots import states
+from fleetcore.steps import ANY, Step
+from robots import poses as pose_store
 from robots.models import Robot
 
+FINAL = ("succeeded", "failed", "cancelled")
 RING_MARGIN = 0.35  # metres between neighbouring robots on the ring
 
 
@@ -61,9 +65,11 @@ def free_robots(moment=None) -> list[Robot]:
     return [robot for robot in robots if active_slot(robot, moment) is None]
 
 
-def resolve_robots(step: dict, moment=None, check_schedule: bool = True) -> list[Robot]:
+def resolve_robots(step: dict, moment=None, check_schedule: bool = True, user=None) -> list[Robot]:
     """The robots a step names, each online and (for people) outside its scheduled slots."""
     names = step.get("robots")
+    if names in (None, "", ANY):
+        return [allocate(Step.from_dict(step), user, moment, check_schedule)]
     if names == "all":
         robots = free_robots(moment) if check_schedule else list(Robot.objects.filter(link_status="online"))
         if not robots:
@@ -85,6 +91,60 @@ def resolve_robots(step: dict, moment=None, check_schedule: bool = True) -> list
                 f"{robot.name} is busy with its schedule {describe_slot(slot)}; it is free from {slot.end:%H:%M}."
             )
     return robots
+
+
+def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) -> Robot:
+    """The one best robot for a step that names none: capable, free, nearest to the destination.
+
+    Capable: bound for what the action needs (fleetcore/actions.py). Free: online and ready, no running or queued
+    instruction, no schedule slot now, no lease held by someone else. Nearest: straight-line distance from its
+    last pose to the destination (robots without a known pose come last). Ties: the lower name.
+    Refused, naming why each robot was passed over, when none is free.
+    """
+    candidates = list(Robot.objects.filter(link_status=Robot.Link.ONLINE).prefetch_related("bindings"))
+    busy = set(
+        Execution.objects.filter(robot__in=candidates)
+        .exclude(status__in=FINAL)
+        .values_list("robot_id", flat=True)
+    )
+    held = {lease.robot_id: lease.user for lease in leases.active([r.pk for r in candidates])}
+    passed_over, free = [], []
+    for robot in candidates:
+        roles = {b.action for b in robot.bindings.all() if b.target}
+        why = _unfit(robot, step, roles, robot.pk in busy, held.get(robot.pk), user, moment, check_schedule)
+        (passed_over.append(f"{robot.name} {why}") if why else free.append(robot))
+    if not free:
+        detail = "; ".join(passed_over) or "no robot is online"
+        raise Refused(
+            f"No robot is free to {step.action} now ({detail}). Name one, or try again when one is free."
+        )
+    poses = pose_store.last_poses([robot.pk for robot in free])
+    target = (step.destination.x, step.destination.y) if step.destination else None
+
+    def distance(robot: Robot) -> float:
+        pose = poses.get(robot.pk) or _start(robot)
+        return math.dist((pose["x"], pose["y"]), target) if pose and target else math.inf
+
+    return min(free, key=lambda robot: (distance(robot), robot.name))
+
+
+def _unfit(robot, step: Step, roles, busy, holder, user, moment, check_schedule) -> str | None:
+    """Why this robot cannot take the step now, in words; None when it can."""
+    missing = step.spec.missing(roles)
+    if missing:
+        return f"has no {' and no '.join(missing)} bound"
+    if busy or robot.state != Robot.State.READY:
+        return f"is busy ({robot.state})"
+    if holder is not None and holder != user:
+        return f"is held by {holder.username}"
+    if check_schedule and (slot := active_slot(robot, moment)) is not None:
+        return f"has its schedule {describe_slot(slot)}"
+    return None
+
+
+def _start(robot: Robot) -> dict | None:
+    pose = robot.start_pose
+    return {"x": pose[0], "y": pose[1]} if pose and len(pose) >= 2 else None
 
 
 def radius_of(robot: Robot) -> float:
@@ -129,9 +189,17 @@ def plan(parse: dict, user, moment=None, check_schedule: bool = True) -> dict[Ro
     """Split the interpreter's steps into each robot's list of steps, or raise Refused."""
     per_robot: dict[int, list[dict]] = defaultdict(list)
     robots_by_id: dict[int, Robot] = {}
-    poses = coordination.last_poses()
-    for step in parse.get("steps", []):
-        robots = resolve_robots(step, moment, check_schedule)
+    try:
+        steps = step_contract.validate(parse.get("steps"))
+    except step_contract.StepError as exc:
+        raise Refused(str(exc)) from None
+    poses = {
+        pk: (p["x"], p["y"], p.get("yaw", 0.0))
+        for pk, p in pose_store.last_poses(Robot.objects.values_list("pk", flat=True)).items()
+    }
+    for checked, step in zip(steps, parse["steps"], strict=True):
+        step = checked.to_dict()
+        robots = resolve_robots(step, moment, check_schedule, user)
         destination = step.get("destination")
         goals = ring_goals(destination, robots, poses) if destination and len(robots) > 1 else {}
         for robot in robots:
@@ -158,9 +226,9 @@ def dispatch(instruction: Instruction, per_robot: dict[Robot, list[dict]]) -> li
     for robot, steps in per_robot.items():
         robot.refresh_from_db(fields=["state", "link_status"])
         if robot.state in (Robot.State.OFFLINE, Robot.State.REGISTERED):
-            states.transition(robot.pk, Event.LINK_UP, "woken by an instruction", instruction)
+            Robot.objects.transition(robot.pk, Event.LINK_UP, "woken by an instruction", instruction)
             robot.refresh_from_db(fields=["state"])
-        priority = statemachine.activity_priority(steps)
+        priority = step_contract.priority(steps)
         admission = statemachine.admit(robot.state, priority)
         execution = Execution.objects.create(
             instruction=instruction, robot=robot, steps=steps, priority=priority, dispatched_at=now

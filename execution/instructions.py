@@ -15,7 +15,6 @@ from audit import records as audit
 from execution import dispatch
 from execution.models import Instruction
 from fleetcore.states import Event
-from robots import states
 from robots.models import Robot
 
 
@@ -73,7 +72,7 @@ def _ask(instruction: Instruction, result: dict) -> Instruction:
         names = step.get("robots")
         if isinstance(names, list):
             for robot in Robot.objects.filter(name__in=names, state=Robot.State.READY):
-                states.transition(robot.pk, Event.ASK, question[:255], instruction)
+                Robot.objects.transition(robot.pk, Event.ASK, question[:255], instruction)
     return _close(instruction, Instruction.Status.NEEDS_USER, question)
 
 
@@ -82,7 +81,7 @@ def close_dialog(instruction: Instruction, reason: str) -> None:
     for robot in Robot.objects.filter(
         transitions__instruction=instruction, state=Robot.State.DIALOG
     ).distinct():
-        states.transition(robot.pk, Event.DONE, reason, instruction)
+        Robot.objects.transition(robot.pk, Event.DONE, reason, instruction)
     if instruction.status == Instruction.Status.NEEDS_USER:
         _close(instruction, Instruction.Status.CANCELLED, f"{instruction.outcome} ({reason})")
 
@@ -93,7 +92,7 @@ def _stop(instruction: Instruction, result: dict, user) -> Instruction:
     names = set()
     for step in result.get("steps", []):
         robots = step.get("robots")
-        if robots == "all" or not robots:
+        if not isinstance(robots, list) or not robots:  # "stop", "stop all": every robot
             names |= set(Robot.objects.values_list("name", flat=True))
         else:
             names |= set(robots)

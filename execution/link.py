@@ -221,6 +221,20 @@ class RobotLink:
         near = pose is not None and ((pose[0] - goal.target[0]) ** 2 + (pose[1] - goal.target[1]) ** 2) ** 0.5
         return "succeeded" if near is not False and near < 0.25 else None
 
+    @property
+    def can_dock(self) -> bool:
+        """Whether the robot has a docking action server bound (a ROS 2 action such as the Create 3's dock)."""
+        return "dock" in self.bindings and self.robot.ros_version == 2
+
+    def dock(self) -> Goal:
+        """Start the robot's own docking action; follow it with goal_outcome, stop it with cancel."""
+        binding = self.bindings["dock"]
+        ns = action_namespace(binding.target)
+        action_type = binding.message_type or "irobot_create_msgs/action/Dock"
+        handle = self.client.send_action_goal(ns, action_type, {})
+        result = asyncio.run_coroutine_threadsafe(handle.wait(None), self.client.runner.loop)
+        return Goal(NAV_NAV2, handle.id, tuple(self.robot.start_pose or (0.0, 0.0))[:2], handle, result)
+
     def cancel(self, goal: Goal) -> None:
         if goal.kind == NAV_MOVE_BASE:
             ns = action_namespace(self.bindings["navigate"].target)

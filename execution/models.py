@@ -96,6 +96,42 @@ class Instruction(models.Model):
         return self.status in self.FINAL
 
 
+class ExecutionQuerySet(models.QuerySet):
+    WAITING = ("queued", "preempted")
+    FINAL = ("succeeded", "failed", "cancelled")
+
+    def waiting(self):
+        """Executions that have not started, or were preempted and wait to go on."""
+        return self.filter(status__in=self.WAITING)
+
+    def final(self):
+        return self.filter(status__in=self.FINAL)
+
+    def current_work(self, robot_ids, running_only: bool = False) -> tuple[dict, dict]:
+        """Per robot: the instruction it is working on ({id, text, status}) and its goal ({name, x, y})."""
+        current, goals = {}, {}
+        active = ("running",) if running_only else ("running", "queued")
+        rows = self.filter(robot_id__in=robot_ids, status__in=active).select_related("instruction")
+        for execution in rows.order_by("created_at"):
+            if execution.robot_id in current:
+                continue
+            current[execution.robot_id] = {
+                "id": execution.instruction_id,
+                "text": execution.instruction.text,
+                "status": execution.status,
+            }
+            steps = execution.steps or []
+            step = steps[min(execution.step_index, len(steps) - 1)] if steps else {}
+            destination = step.get("destination") if isinstance(step, dict) else None
+            if destination and destination.get("x") is not None:
+                goals[execution.robot_id] = {
+                    "name": destination.get("name"),
+                    "x": destination["x"],
+                    "y": destination["y"],
+                }
+        return current, goals
+
+
 class Execution(models.Model):
     """One robot's share of one instruction: one step after another, each timed."""
 
@@ -120,6 +156,8 @@ class Execution(models.Model):
     motion_started_at = models.DateTimeField(null=True, blank=True)
     finished_at = models.DateTimeField(null=True, blank=True)
     error = models.TextField(blank=True)
+
+    objects = ExecutionQuerySet.as_manager()
 
     class Meta:
         ordering = ["created_at"]

@@ -13,9 +13,12 @@ import math
 
 from django.conf import settings
 
+from execution.models import Execution
 from fleetcore.mapfile import OccupancyGrid
 from fleetcore.planning import Planner
 from places.models import Map
+from robots import poses as pose_store
+from robots.models import Robot
 
 log = logging.getLogger(__name__)
 
@@ -66,15 +69,9 @@ def _planner(map_id: int, version: str, radius: float) -> Planner:
 def robots_in_the_way(robot, start: tuple[float, float]) -> list[tuple[float, float, float]]:
     """Other robots near the start as discs (x, y, radius): where the links process last saw them, and where
     those under way are going (they will stand there when we pass)."""
-    from django.core.cache import cache
-
-    import live
-    from robots.models import Robot
-
     others = {r.pk: r for r in Robot.objects.exclude(pk=robot.pk).only("pk", "footprint")}
-    poses = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in others])
-    spots = [(pose["id"], pose["x"], pose["y"]) for pose in poses.values() if pose.get("id") in others]
-    _, goals = live.current_work(list(others), running_only=True)
+    spots = [(pk, pose["x"], pose["y"]) for pk, pose in pose_store.last_poses(others).items()]
+    _, goals = Execution.objects.current_work(list(others), running_only=True)
     spots += [(pk, goal["x"], goal["y"]) for pk, goal in goals.items()]
     return [
         (x, y, reach_radius(others[pk].footprint))

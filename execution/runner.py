@@ -21,7 +21,7 @@ from execution.link import LinkError, RobotLink
 from execution.models import Execution, Instruction
 from execution.steps import Interrupted, Session, StepFailed, advance, run_step
 from fleetcore.states import Event
-from robots import states
+from robots.models import Robot
 
 log = logging.getLogger(__name__)
 
@@ -157,7 +157,9 @@ def finish(execution: Execution, token: str, outcome: str, words: str) -> bool:
         **fields
     )
     if won:
-        states.transition(execution.robot_id, OUTCOME_EVENT[outcome], words[:255], execution.instruction_id)
+        Robot.objects.transition(
+            execution.robot_id, OUTCOME_EVENT[outcome], words[:255], execution.instruction_id
+        )
         settle(execution.instruction_id, words if outcome == "succeeded" else "")
     return bool(won)
 

@@ -25,7 +25,6 @@ from django.utils import timezone
 from execution import watchdog
 from execution.models import TimeSlot
 from fleetcore.states import Event
-from robots import states
 from robots.models import Robot
 
 log = logging.getLogger(__name__)
@@ -96,7 +95,7 @@ def expire_idle(now: datetime.datetime) -> None:
         last = robot.last or robot.registered_at
         if (now - last).total_seconds() > limits[robot.state]:
             event, reason = events[robot.state]
-            states.transition(robot.pk, event, f"{reason} for {limits[robot.state]:.0f} s")
+            Robot.objects.transition(robot.pk, event, f"{reason} for {limits[robot.state]:.0f} s")
 
 
 def tick(clock: Clock) -> dict:

@@ -1,5 +1,6 @@
-"""One robot's steps, run through its link: move to a goal (own controller or its nav stack), then a task.
+"""Running one robot's steps through its link: the session, the tick loop, goals for a nav stack, and dispatch.
 
+Each step runs through its action's handler (execution/handlers.py, named by fleetcore/actions.py).
 A Session carries what the control loop needs each tick: the next pose from odometry, the stop and preempt
 flags, the lock renewal, and the timing stamps (first command published, motion seen in odometry).
 """
@@ -12,15 +13,14 @@ import uuid
 from dataclasses import dataclass, field
 
 from django.utils import timezone
+from django.utils.module_loading import import_string
 
-import live
 from execution import coordination
 from execution.link import RobotLink
 from execution.models import Execution, Instruction
-from execution.route import route
 from fleetcore import geometry, motion
-from fleetcore.states import Event
-from robots import states
+from fleetcore.steps import Step
+from robots import poses as pose_store
 
 ODOMETRY_TIMEOUT = 1.0  # s without an odometry message fails the step
 RENEW_EVERY = 0.5  # s between lock renewals (the lock lives LOCK_TTL_MS)
@@ -70,7 +70,7 @@ class Session:
                 raise Interrupted("failed", "lost the robot lock (another worker took over)")
             self.last_renew = time.monotonic()
             if self.link.poses.value is not None:
-                coordination.store_pose(self.robot.pk, self.link.poses.value)
+                pose_store.store_pose(self.robot.pk, self.link.poses.value)
         stopped_at, preemptor = coordination.flags(self.robot.pk)
         if stopped_at > self.started:
             raise Interrupted("cancelled", "stopped")
@@ -147,6 +147,11 @@ def navigate(session: Session, x: float, y: float, limit_s: float) -> None:
     session.check()
     goal = session.link.navigate(x, y, 0.0, f"fleet-{session.execution.pk}-{uuid.uuid4().hex[:8]}")
     session.mark_commanded()
+    follow_goal(session, goal, limit_s, "navigation")
+
+
+def follow_goal(session: Session, goal, limit_s: float, what: str) -> None:
+    """Follow a goal the robot's own stack runs (navigation, docking) until it ends; cancel it on any exit."""
     deadline = time.monotonic() + limit_s
     try:
         while True:
@@ -156,9 +161,9 @@ def navigate(session: Session, x: float, y: float, limit_s: float) -> None:
             if outcome == "succeeded":
                 return
             if outcome in ("failed", "cancelled"):
-                raise StepFailed(f"{session.robot.name}: the navigation stack reports the goal {outcome}")
+                raise StepFailed(f"{session.robot.name}: {what} reports the goal {outcome}")
             if time.monotonic() > deadline:
-                raise StepFailed(f"{session.robot.name}: navigation did not arrive within {limit_s:.0f} s")
+                raise StepFailed(f"{session.robot.name}: {what} did not finish within {limit_s:.0f} s")
     except BaseException:
         session.link.halt(goal)
         raise
@@ -169,98 +174,12 @@ def travel_time(distance: float, turn: float, limits: motion.Limits, factor: flo
     return 3 * (distance / (limits.linear * factor) + turn / (limits.angular * factor)) + 10
 
 
-WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
-BLOCKED_S = 2.0  # s commanded without moving: something unplanned is in the way
-REROUTES, BACK_OFF_S = 2, 1.0
-
-
-def go_to(session: Session, destination: dict, factor: float) -> None:
-    x, y = float(destination["x"]), float(destination["y"])
-    name = destination.get("name") or f"({x:g}, {y:g})"
-    states.transition(session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id)
-    live.goal(session.robot, name, x, y)  # the map draws the goal until the robot is done with it
-    pose = session.pose()
-    limits = session.link.limits()
-    distance = math.hypot(x - pose[0], y - pose[1])
-    try:
-        if session.link.nav_kind:
-            nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
-            navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
-        else:
-            drive_route(session, (x, y), limits, factor)
-    finally:
-        live.goal(session.robot, None, None, None)
-
-
-def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> None:
-    """Drive a route leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal.
-
-    Blocked on the way (a robot that parked there after the plan was made), the robot backs off a little and
-    plans again from where it is, with the other robots' live poses, up to REROUTES times.
-    """
-    for attempt in range(REROUTES + 1):
-        pose = session.pose()
-        try:
-            for x, y in route(session.robot, pose[:2], goal):
-                pose = session.pose()
-                last_leg = (x, y) == goal
-                tolerance = motion.TOLERANCE if last_leg else WAYPOINT_TOLERANCE
-                controller = motion.GoToGoal((x, y), limits, factor, tolerance)
-                limit = travel_time(math.hypot(x - pose[0], y - pose[1]), math.pi, limits, factor)
-                drive(session, controller, limit, blocked_s=BLOCKED_S)
-            return
-        except Blocked:
-            if attempt == REROUTES:
-                raise
-            back_off(session, limits)
-
-
-def back_off(session: Session, limits: motion.Limits) -> None:
-    """Reverse slowly for a moment, to leave room to turn."""
-    until = time.monotonic() + BACK_OFF_S
-    while time.monotonic() < until:
-        session.send(-0.25 * limits.linear, 0.0)
-        session.pose()
-    session.link.halt()
-
-
-def do_task(session: Session, task: str, factor: float, where: str) -> None:
-    name, count = motion.parse_task(task)
-    states.transition(session.robot.pk, Event.WORK, f"{task} at {where}", session.execution.instruction_id)
-    pose = session.pose()
-    limits = session.link.limits()
-    controller = motion.task_controller(task, pose, limits, factor)
-    if name == "rotate":
-        limit = travel_time(0.0, 2 * math.pi * count, limits, factor)
-    else:
-        limit = travel_time(motion.CLEAN_SIZE * (motion.CLEAN_LANES + 2), 2 * math.pi * 3, limits, factor)
-    drive(session, controller, limit)
-
-
-def report(session: Session) -> str:
-    x, y, yaw = session.pose()
-    return f"{session.robot.name} is at ({x:.2f}, {y:.2f}), heading {math.degrees(yaw):.0f}°"
-
-
 def run_step(session: Session, step: dict) -> str:
-    """Run one step; return a few words on what was done."""
-    action = step.get("action") or ("move" if step.get("destination") else None)
-    if action == "report_position":
-        return report(session)
-    destination = step.get("destination")
-    if action == "dock":
-        x0, y0, _ = session.robot.start_pose or (0.0, 0.0, 0.0)
-        destination = {"name": "home", "x": x0, "y": y0}
-    if not destination and not step.get("task"):
-        raise StepFailed(f"{session.robot.name}: nothing to do for the action {action!r}")
-    factor = motion.speed_factor(step.get("speed"))
-    if destination:
-        go_to(session, destination, factor)
-    where = destination.get("name", "the goal") if destination else "its place"
-    if step.get("task"):
-        do_task(session, step["task"], factor, where)
-        return f"{step['task']} done at {where}"
-    return f"arrived at {where}"
+    """Run one step with its action's handler (fleetcore/actions.py); return a few words on what was done."""
+    checked = Step.from_dict(step)
+    if checked.spec.handler is None:
+        raise StepFailed(f"{session.robot.name}: {checked.action!r} is not something the executor runs")
+    return import_string(checked.spec.handler)(session, checked)
 
 
 def advance(execution: Execution, index: int) -> None:

@@ -18,7 +18,7 @@ from execution.link import publish_zero
 from execution.models import Execution
 from execution.runner import WAITING, settle
 from fleetcore.states import Event
-from robots import states
+from robots.models import Robot
 
 log = logging.getLogger(__name__)
 STALLED_AFTER = 3.0  # s a queued execution may wait for its task before the robot is kicked
@@ -44,7 +44,7 @@ def recover(robot_ids=None) -> list[int]:
             publish_zero(execution.robot)
         except Exception as exc:  # report, and still settle the instruction
             log.warning("%s: could not stop after a lost worker: %s", execution.robot.name, exc)
-        states.transition(execution.robot_id, Event.FAIL, LOST, execution.instruction_id)
+        Robot.objects.transition(execution.robot_id, Event.FAIL, LOST, execution.instruction_id)
         settle(execution.instruction_id)
     return failed
 

@@ -36,9 +36,14 @@ def speed_factor(word: str | None) -> float:
 
 def parse_task(task: str) -> tuple[str, int]:
     """("rotate", 3) from "rotate(3)"; ("clean", 1) from "clean"; StepError for anything else."""
-    match = TASK_RE.match(str(task).strip().lower())
-    if not match or match["name"] not in actions.ACTIONS or actions.ACTIONS[match["name"]].category != "task":
-        tasks = [a.name for a in actions.ACTIONS.values() if a.category == "task"]
+    match = TASK_RE.match(re.sub(r"\s+", "", str(task or "")).lower())
+    spec = actions.ACTIONS.get(match["name"]) if match else None
+    if spec is None or spec.category != "task" or (match["count"] and not spec.countable):
+        tasks = [
+            f"{a.name}(n)" if a.countable else a.name
+            for a in actions.ACTIONS.values()
+            if a.category == "task"
+        ]
         raise StepError(f"unknown task {task!r}; known: {', '.join(tasks)}")
     count = int(match["count"] or 1)
     if not 1 <= count <= MAX_COUNT:

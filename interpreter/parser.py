@@ -12,6 +12,7 @@ import re
 import unicodedata
 from dataclasses import dataclass, field
 
+from fleetcore.steps import ALL, ANY
 from interpreter.lexicon import Grammar, Meaning, Place
 
 MAX_WORDS = 300
@@ -446,10 +447,10 @@ def _task(draft: StepDraft, grammar) -> str | None:
 
 
 def _step_dict(draft: StepDraft, grammar) -> dict:
-    robots = draft.robots or "all"
+    robots = list(draft.robots) or (ALL if draft.all else ANY)  # no robot named: the one best (allocation)
     return {
         "action": draft.action,
-        "robots": robots if robots == "all" else list(robots),
+        "robots": robots,
         "destination": draft.dest.as_dict() if draft.dest else None,
         "task": _task(draft, grammar),
         "speed": draft.speed,
@@ -596,7 +597,7 @@ _PROBLEM_WORDS = {
 
 
 def _describe(step: dict) -> str:
-    robots = step["robots"] if step["robots"] == "all" else ", ".join(step["robots"])
+    robots = step["robots"] if isinstance(step["robots"], str) else ", ".join(step["robots"])
     text = f"{step['action']} {robots}"
     if step["destination"]:
         text += f" to {step['destination']['name']}"

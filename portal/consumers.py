@@ -16,6 +16,7 @@ import live
 from access.roles import can_control
 from execution import fast_stop
 from execution.held_teleop import HeldTeleop
+from portal import snapshots
 
 VIEW_PERM = "robots.view_robot"
 log = logging.getLogger(__name__)
@@ -225,7 +226,7 @@ class FleetConsumer(_PageConsumer):
         return [live.FLEET_GROUP, live.POSES_GROUP]
 
     def snapshot(self):
-        return live.fleet_snapshot()
+        return snapshots.fleet_snapshot()
 
     async def fleet_poses(self, event):
         await self.send_json(event)
@@ -242,7 +243,7 @@ class RobotConsumer(_PageConsumer):
 
         self.robot_id = self.scope["url_route"]["kwargs"]["robot_id"]
         robot = Robot.objects.filter(pk=self.robot_id).first()
-        return live.robot_snapshot(robot) if robot else None
+        return snapshots.robot_snapshot(robot) if robot else None
 
     async def fleet_poses(self, event):
         mine = [pose for pose in event["poses"] if pose["id"] == self.robot_id]

@@ -13,11 +13,11 @@ from django.http import JsonResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.views.decorators.http import require_POST
 
-import live
 from access.roles import AUDIT_PERM, REGISTER_PERM
 from audit.models import AuditEntry
 from execution.models import Instruction, TimeSlot
 from places.models import Location, Map
+from portal import snapshots
 from portal.consumers import run_command
 from robots.models import Binding, RegistrationRecord, Robot
 
@@ -77,7 +77,7 @@ def _map_context() -> dict:
 def dashboard(request):
     """The fleet at a glance: live map, robots, instruction console."""
     map_data = _map_context()
-    rows = live.robot_rows(Robot.objects.all())
+    rows = snapshots.robot_rows(Robot.objects.all())
     context = {
         "robots": rows,
         "map_data": map_data,
@@ -89,13 +89,13 @@ def dashboard(request):
 
 def robot_list(request):
     """Every robot with its link, state, current instruction and speed (live)."""
-    return render(request, "fleet/robot_list.html", {"robots": live.robot_rows(Robot.objects.all())})
+    return render(request, "fleet/robot_list.html", {"robots": snapshots.robot_rows(Robot.objects.all())})
 
 
 def robot_detail(request, pk: int):
     """One robot: bindings and how each was found, its ROS graph, URDF facts, history, teleop and lease."""
     robot = _get_robot_for_user(request, pk)
-    row = live.robot_rows([robot])[0]
+    row = snapshots.robot_rows([robot])[0]
     context = {
         "robot": robot,
         "row": row,

@@ -22,6 +22,7 @@ from django.db import close_old_connections
 from django.utils import timezone
 
 import live
+from fleetcore.states import Event
 from robots.models import Robot
 from robots.rosbridge import RosbridgeClient
 
@@ -65,14 +66,11 @@ def set_link_status(url: str, up: bool) -> list[str]:
 
 def follow_link_in_state_machine(url: str, up: bool) -> None:
     """A link that comes up makes a registered or offline robot ready; a link that drops makes it offline."""
-    from fleetcore.states import Event
-    from robots.states import transition
-
     waiting = [Robot.State.REGISTERED, Robot.State.OFFLINE]
     robots = Robot.objects.filter(endpoint=url)
     robots = robots.filter(state__in=waiting) if up else robots.exclude(state=Robot.State.OFFLINE)
     for robot in robots:
-        transition(robot, Event.LINK_UP if up else Event.LINK_DOWN, "link up" if up else "link lost")
+        robot.transition(Event.LINK_UP if up else Event.LINK_DOWN, "link up" if up else "link lost")
 
 
 def touch(urls: Iterable[str]) -> None:

@@ -1,7 +1,46 @@
 """Registered robots and the ROS graph discovered behind each rosbridge endpoint."""
 
+import logging
+
 from django.db import models
 from django.utils import timezone
+
+import live
+from fleetcore.bindings import ROLES
+from fleetcore.states import IllegalTransition, next_state
+from fleetcore.states import State as RobotState
+
+log = logging.getLogger(__name__)
+
+
+class RobotManager(models.Manager):
+    def transition(self, robot, event: str, reason: str = "", instruction=None):
+        """Apply an event to a robot's state (the table in fleetcore.states); store and push the transition.
+
+        None when the event is illegal in the robot's state now. A compare-and-set on the state (no
+        read-then-write transaction), so concurrent runners never interleave.
+        """
+        robot_id = robot if isinstance(robot, int) else robot.pk
+        for _ in range(5):
+            current = self.get(pk=robot_id)
+            try:
+                to_state = next_state(current.state, event)
+            except IllegalTransition as exc:
+                log.info("%s: %s (%s)", current.name, exc, reason)
+                return None
+            if self.filter(pk=robot_id, state=current.state).update(state=to_state):
+                return current._record_transition(to_state, reason, instruction)
+        return None
+
+    def force_state(self, robot, to_state: str, reason: str, instruction=None):
+        """Set a state whatever the current one (recovery); None if already there."""
+        robot_id = robot if isinstance(robot, int) else robot.pk
+        current = self.get(pk=robot_id)
+        if current.state == to_state or not self.filter(pk=robot_id, state=current.state).update(
+            state=to_state
+        ):
+            return None
+        return current._record_transition(to_state, reason, instruction)
 
 
 class Robot(models.Model):
@@ -17,15 +56,8 @@ class Robot(models.Model):
         OFFLINE = "offline"
         REGISTERING = "registering"
 
-    class State(models.TextChoices):
-        """The paper's Figure 5 states; the order of PRIORITY is work > motion > dialog > ready."""
-
-        REGISTERED = "registered"
-        READY = "ready"
-        DIALOG = "dialog"
-        MOTION = "motion"
-        WORK = "work"
-        OFFLINE = "offline"
+    # The paper's Figure 5 states; the one enum of them is fleetcore.states.State (transitions: its table).
+    State = models.TextChoices("State", [(state.name, state.value) for state in RobotState])
 
     name = models.CharField(max_length=100, unique=True)
     model = models.CharField(max_length=100, blank=True, help_text="e.g. turtlebot3_burger, husky, tiago")
@@ -50,6 +82,8 @@ class Robot(models.Model):
     registered_at = models.DateTimeField(default=timezone.now)
     updated_at = models.DateTimeField(auto_now=True)
 
+    objects = RobotManager()
+
     class Meta:
         ordering = ["name"]
         constraints = [
@@ -63,6 +97,27 @@ class Robot(models.Model):
 
     def __str__(self):
         return self.name
+
+    def transition(self, event: str, reason: str = "", instruction=None):
+        """Apply an event to this robot's state; see RobotManager.transition."""
+        record = Robot.objects.transition(self.pk, event, reason, instruction)
+        if record is not None:
+            self.state = record.to_state
+        return record
+
+    def _record_transition(self, to_state: str, reason: str, instruction):
+        record = StateTransition.objects.create(
+            robot=self,
+            from_state=self.state,
+            to_state=to_state,
+            at=timezone.now(),
+            reason=reason[:255],
+            instruction_id=instruction if isinstance(instruction, int) else getattr(instruction, "pk", None),
+        )
+        self.state = to_state
+        live.transition(self, record)
+        live.robot_status(self)
+        return record
 
     def topic_name(self, relative: str) -> str:
         """Resolve a robot-relative topic name under this robot's namespace."""
@@ -128,15 +183,8 @@ class Param(models.Model):
 class Binding(models.Model):
     """Which topic, service or action carries one action of one robot, and how that was decided."""
 
-    class Action(models.TextChoices):
-        MOVE = "move"
-        ODOMETRY = "odometry"
-        POSE = "pose"
-        NAVIGATE = "navigate"
-        SCAN = "scan"
-        MAP = "map"
-        INITIAL_POSE = "initial_pose"
-        BATTERY = "battery"
+    # The roles of fleetcore/bindings.py, the one table of them.
+    Action = models.TextChoices("Action", [(name.upper(), name) for name in ROLES])
 
     class How(models.TextChoices):
         EXACT = "exact"

@@ -25,6 +25,10 @@ from collections import defaultdict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
+from asgiref.sync import sync_to_async
+from channels.layers import get_channel_layer
+from django.core.cache import cache
+
 import live
 from fleetcore.geometry import Pose2D, compose, inverse, pose_of, start_offset, twist_of
 
@@ -45,17 +49,36 @@ class Subscription:
     queue_length: int = 1
 
 
+POSE_TTL_S = 60  # a robot not heard of for this long has no last pose
+
+
+def store_poses(batch: list[live.RobotPose]) -> None:
+    """Keep the latest map pose of each robot: the one store of "where is robot X" (pages, dispatch, routes)."""
+    cache.set_many({live.POSE_CACHE_KEY.format(id=pose["id"]): pose for pose in batch}, timeout=POSE_TTL_S)
+
+
+def store_pose(robot_id: int, pose: Pose2D) -> None:
+    """Keep one robot's pose (an executor's own odometry, between the pose hub's ticks)."""
+    x, y, yaw = pose
+    store_poses([live.RobotPose(id=robot_id, x=round(x, 3), y=round(y, 3), yaw=round(yaw, 4))])
+
+
+def last_poses(robot_ids) -> dict[int, dict]:
+    """{robot id: {"id", "x", "y", "yaw", ...}} for the robots whose pose is known."""
+    try:
+        found = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in robot_ids])
+    except Exception:  # the cache is away: no pose is known, callers plan without them
+        log.warning("last poses unavailable", exc_info=True)
+        return {}
+    return {pose["id"]: pose for pose in found.values() if isinstance(pose, dict) and "id" in pose}
+
+
 async def publish_to_channels(batch: list[live.RobotPose]) -> None:
     """Send one tick of poses to the browsers and keep the latest per robot for new subscribers' snapshots."""
-    from asgiref.sync import sync_to_async
-    from channels.layers import get_channel_layer
-    from django.core.cache import cache
-
     layer = get_channel_layer()
     if layer is not None:
         await layer.group_send(live.POSES_GROUP, live.poses(batch))
-    latest = {live.POSE_CACHE_KEY.format(id=pose["id"]): pose for pose in batch}
-    await sync_to_async(cache.set_many)(latest, timeout=60)
+    await sync_to_async(store_poses)(batch)
 
 
 class PoseHub:

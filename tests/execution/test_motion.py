@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from fleetcore import geometry, motion
 from fleetcore.motion import GoToGoal, Limits, Rotate
+from fleetcore.steps import SPEEDS, StepError, parse_task, speed_factor
 
 TB3 = Limits(0.22, 2.84)
 
@@ -30,10 +31,10 @@ def simulate(controller, pose, dt=0.05, steps=4000):
 @settings(max_examples=60, deadline=None)
 @given(
     st.floats(-5, 5), st.floats(-5, 5), st.floats(-math.pi, math.pi), st.floats(-5, 5), st.floats(-5, 5),
-    st.sampled_from([None, "slowly", "fast", "very fast"]),
+    st.sampled_from([None, *SPEEDS]),
 )  # fmt: skip
 def test_go_to_goal_arrives_within_tolerance_and_limits(x, y, yaw, gx, gy, speed):
-    factor = motion.speed_factor(speed)
+    factor = speed_factor(speed)
     controller = GoToGoal((gx, gy), TB3, factor)
     (fx, fy, _), commands = simulate(controller, (x, y, yaw))
     assert math.hypot(fx - gx, fy - gy) < motion.TOLERANCE
@@ -77,23 +78,23 @@ def test_clean_covers_the_square_around_the_location():
 
 @pytest.mark.parametrize(
     ("task", "parsed"),
-    [("rotate(5)", ("rotate", 5.0)), ("clean", ("clean", None)), ("Rotate ( 2 )", ("rotate", 2.0))],
+    [("rotate(5)", ("rotate", 5)), ("clean", ("clean", 1)), ("Rotate ( 2 )", ("rotate", 2))],
 )
 def test_parse_task(task, parsed):
-    assert motion.parse_task(task) == parsed
+    assert parse_task(task) == parsed
 
 
 @pytest.mark.parametrize("task", ["dance", "rotate(-1)", "rotate(1000)", "clean(3)", "", None])
 def test_parse_task_refuses_unknown_tasks(task):
-    with pytest.raises(ValueError):
-        motion.parse_task(task)
+    with pytest.raises(StepError):
+        parse_task(task)
 
 
 def test_speed_words_and_unknown_speed():
-    assert motion.speed_factor("slowly") < motion.speed_factor(None) < motion.speed_factor("fast") <= 1.0
-    assert motion.speed_factor("very fast") == 1.0
-    with pytest.raises(ValueError, match="warp"):
-        motion.speed_factor("warp")
+    assert speed_factor("slow") < speed_factor(None) < speed_factor("fast") <= 1.0
+    assert speed_factor("very fast") == 1.0
+    with pytest.raises(StepError, match="warp"):
+        speed_factor("warp")
 
 
 def test_limits_must_be_positive():

@@ -8,11 +8,11 @@ from fleetcore.states import (
     Event,
     IllegalTransition,
     State,
-    activity_priority,
     admit,
     can,
     next_state,
 )
+from fleetcore.steps import priority
 
 
 def test_the_paper_cycle_registered_ready_dialog_motion_work_ready():
@@ -58,11 +58,15 @@ def test_priorities_work_over_motion_over_dialog_over_ready():
     assert PRIORITY[State.WORK] > PRIORITY[State.MOTION] > PRIORITY[State.DIALOG] > PRIORITY[State.READY]
 
 
-def test_step_priorities():
-    assert activity_priority([{"destination": {"x": 1, "y": 2}}]) == PRIORITY[State.MOTION]
-    assert activity_priority([{"destination": None, "task": "rotate(5)"}]) == PRIORITY[State.WORK]
-    assert activity_priority([{"destination": {"x": 1, "y": 2}}, {"task": "clean"}]) == PRIORITY[State.WORK]
-    assert activity_priority([]) == PRIORITY[State.READY]
+def test_step_priorities_come_from_the_action_registry():
+    assert priority([{"destination": {"x": 1, "y": 2}}]) == PRIORITY[State.MOTION]
+    assert priority([{"destination": None, "task": "rotate(5)"}]) == PRIORITY[State.WORK]
+    assert priority([{"destination": {"x": 1, "y": 2}}, {"task": "clean"}]) == PRIORITY[State.WORK]
+    assert priority([]) == PRIORITY[State.READY]
+
+
+def test_dock_moves_the_robot_so_it_runs_at_motion_priority_not_dialog():
+    assert priority([{"action": "dock", "robots": ["husky"]}]) == PRIORITY[State.MOTION]
 
 
 @pytest.mark.parametrize(
@@ -87,7 +91,7 @@ def test_next_leg_and_next_task_are_self_transitions():
 
 
 def test_the_plain_states_are_the_models_states():
-    """fleetcore.states needs no Django, so it spells the states again; they must not drift apart."""
+    """One enum: the model's choices are built from fleetcore.states.State."""
     from fleetcore.states import State
     from robots.models import Robot
 

@@ -10,7 +10,7 @@ from places.models import Location, Map
 from places.worlds import load_world_into_db
 from robots.models import Robot
 
-PAPER_MAP = Path(__file__).resolve().parents[2] / "simworker" / "worlds" / "paper" / "map.yaml"
+PAPER_MAP = Path(__file__).resolve().parents[2] / "fleetcore" / "worlds" / "paper" / "map.yaml"
 
 
 @pytest.mark.django_db

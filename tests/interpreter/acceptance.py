@@ -19,12 +19,12 @@ def rows() -> list[dict]:
 def summary(result: dict) -> dict:
     """Put an interpreter result in the table's columns."""
     first = result["steps"][0] if result["steps"] else {}
-    robots = first.get("robots", "all")
+    robots = first.get("robots", "any")
     return {
         "type": result["type"],
         "needs_user": "yes" if result["needs_user"] else "no",
         "action": first.get("action") or "-",
-        "robots": robots if robots == "all" else ",".join(robots),
+        "robots": robots if isinstance(robots, str) else ",".join(robots),
         "destination": (first.get("destination") or {}).get("name", "-"),
         "task": first.get("task") or "-",
         "steps": str(len(result["steps"])),

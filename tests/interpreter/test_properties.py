@@ -21,7 +21,7 @@ def check_shape(result: dict) -> None:
     assert (result["question"] is None) == result["valid"]
     for step in result["steps"]:
         assert set(step) == {"action", "robots", "destination", "task", "speed"}
-        assert step["robots"] == "all" or isinstance(step["robots"], list)
+        assert step["robots"] in ("all", "any") or isinstance(step["robots"], list)
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -1,0 +1,86 @@
+"""What a new subscriber sees first (the snapshot), and the rows the pages render: the same data, one place."""
+
+from django.core.cache import cache
+from django.utils import timezone
+
+import live
+from access.models import ControlLease
+from execution.models import Execution, Instruction
+from robots.models import Robot
+
+
+def _robot_row(robot, holders: dict, current: dict, goals: dict, cached: dict) -> dict:
+    """One robot as the browser draws it."""
+    return {
+        "id": robot.pk,
+        "name": robot.name,
+        "model": robot.model,
+        "drive": robot.drive,
+        "state": robot.state,
+        "link_status": robot.link_status,
+        "footprint": robot.footprint,
+        "max_linear": robot.max_linear,
+        "max_angular": robot.max_angular,
+        "start_pose": robot.start_pose,
+        "holder": holders.get(robot.pk),
+        "instruction": current.get(robot.pk),
+        "goal": goals.get(robot.pk),
+        "pose": cached.get(live.POSE_CACHE_KEY.format(id=robot.pk)),
+    }
+
+
+def robot_rows(robots) -> list[dict]:
+    """The robots with their holders, current instructions, goals and last poses, in few queries."""
+    robots = list(robots)
+    ids = [robot.pk for robot in robots]
+    holders = dict(
+        ControlLease.objects.filter(robot_id__in=ids, expires_at__gt=timezone.now()).values_list(
+            "robot_id", "user__username"
+        )
+    )
+    current, goals = Execution.objects.current_work(ids)
+    try:
+        cached = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in ids])
+    except Exception:  # a missing cache only costs the first tick of poses
+        cached = {}
+    return [_robot_row(robot, holders, current, goals, cached) for robot in robots]
+
+
+def _instruction_row(instruction) -> dict:
+    return {
+        "id": instruction.pk,
+        "text": instruction.text,
+        "status": instruction.status,
+        "type": instruction.type,
+        "outcome": instruction.outcome,
+        "user": instruction.user.username if instruction.user else None,
+    }
+
+
+def fleet_snapshot() -> dict:
+    """What a new dashboard subscriber sees first: every robot (lease, goal, pose) and recent instructions."""
+    recent = Instruction.objects.select_related("user")[:20]
+    return {
+        "type": "snapshot",
+        "robots": robot_rows(Robot.objects.all()),
+        "instructions": [_instruction_row(instruction) for instruction in recent],
+    }
+
+
+def robot_snapshot(robot) -> dict:
+    """What a new robot-page subscriber sees first: the robot and its last state transitions."""
+    transitions = robot.transitions.all()[:20]
+    return {
+        "type": "snapshot",
+        "robots": robot_rows([robot]),
+        "transitions": [
+            {
+                "from_state": record.from_state,
+                "to_state": record.to_state,
+                "at": record.at.isoformat(),
+                "reason": record.reason,
+                "instruction": record.instruction_id,
+            }
+            for record in transitions
+        ],
+    }
