@@ -37,6 +37,7 @@ class Action:
     accepts: tuple[str, ...] = ()  # destination classes (owl:allValuesFrom of hasDestination)
     synonyms: tuple[str, ...] = ()
     description: str = ""
+    unnamed: str = "any"  # who does it when no robot is named: "any" (the one best robot) or "all"
 
     @property
     def priority(self) -> int:
@@ -82,7 +83,7 @@ ACTIONS: dict[str, Action] = {
             "stop", "control", State.READY, None, stop=Stop.NONE,
             synonyms=("halt", "freeze", "cease", "pause", "stand still", "emergency stop", "e stop",
                       "hold on"),
-            description="stop at once",
+            description="stop at once", unnamed="all",
         ),
         Action(
             "dock", "control", State.MOTION, "execution.handlers.dock", (("dock", "move", "navigate"),),

@@ -12,6 +12,7 @@ import re
 import unicodedata
 from dataclasses import dataclass, field
 
+from fleetcore.actions import ACTIONS
 from fleetcore.steps import ALL, ANY
 from interpreter.lexicon import Grammar, Meaning, Place
 
@@ -447,7 +448,8 @@ def _task(draft: StepDraft, grammar) -> str | None:
 
 
 def _step_dict(draft: StepDraft, grammar) -> dict:
-    robots = list(draft.robots) or (ALL if draft.all else ANY)  # no robot named: the one best (allocation)
+    spec = ACTIONS.get(draft.action)
+    robots = list(draft.robots) or (ALL if draft.all else spec.unnamed if spec else ANY)
     return {
         "action": draft.action,
         "robots": robots,

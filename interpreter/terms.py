@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from fleetcore.actions import ACTIONS
+from fleetcore.bindings import ROLES
+
 
 @dataclass(frozen=True)
 class ActionTerm:
@@ -92,17 +95,12 @@ SEED_CLASSES = [
     ClassTerm("Taught", "NotAPlace", False, "a word a person said is not a place"),
 ]
 
+# The actions, their synonyms and the topic keywords come from the one registry of each (fleetcore).
 SEED_ACTIONS = [
-    ActionTerm("move", "motion", True, True, False, LOCATION_ACTIONS, "drive to a destination"),
-    ActionTerm("navigate", "motion", True, True, False, LOCATION_ACTIONS, "plan a path to a destination"),
-    ActionTerm("rotate", "task", False, False, True, (), "turn on the spot, n times"),
-    ActionTerm(
-        "clean", "task", True, False, False, LOCATION_ACTIONS, "clean where it is or at a destination"
-    ),
-    ActionTerm("stop", "control", False, False, False, (), "stop at once"),
-    ActionTerm("dock", "control", False, False, False, (), "go home to the start pose"),
-    ActionTerm("report_position", "query", False, False, False, (), "say where the robot is"),
-]
+    ActionTerm(a.name, a.category, a.takes_destination, a.requires_destination, a.countable, a.accepts,
+               a.description)
+    for a in ACTIONS.values()
+]  # fmt: skip
 
 SEED_CONCEPTS = [
     ConceptTerm("roof", "BuildingPart"),
@@ -117,47 +115,17 @@ SEED_CONCEPTS = [
     ConceptTerm("stars", "CelestialThing"),
 ]
 
-_ACTION_SYNONYMS = {
-    "move": "shift go proceed walk advance head drive travel roll relocate march come|make your way|head over",
-    "navigate": "steer pilot|find your way|plan a path",
-    "rotate": "turn spin revolve twirl pivot|turn around|spin around",
-    "clean": "sweep vacuum mop tidy wash hoover scrub|tidy up",
-    "stop": "halt freeze cease pause|stand still|emergency stop|e stop|hold on",
-    "dock": "|go home|return home|go back home|return to base|go to base|go to dock|go to the dock"
-    "|go back to base|come home|come back",
-    "report_position": "locate|where is|where are|where are you|report position|report your position"
-    "|what is your position|tell me where",
-}
-
 _CONCEPT_SYNONYMS = {"roof": "rooftop", "sky": "heavens", "ceiling": "overhead", "stars": "star"}
 
 
-def _split_synonyms(spec: str) -> list[str]:
-    single, _, phrases = spec.partition("|")
-    return [w for w in single.split() if w] + [p for p in phrases.split("|") if p]
-
-
-SEED_SYNONYMS = [
-    SynonymTerm(word, action=action)
-    for action, spec in _ACTION_SYNONYMS.items()
-    for word in _split_synonyms(spec)
-] + [SynonymTerm(word, concept=concept) for concept, word in _CONCEPT_SYNONYMS.items()]
-
-_KEYWORDS = {
-    "move": "cmd vel cmd_vel velocity speed travel run",
-    "navigate": "move_base goal navigate_to_pose navigation",
-    "odometry": "odom odometry",
-    "scan": "scan laser lidar",
-    "map": "map map_server",
-    "pose": "amcl_pose pose amcl",
-    "initial_pose": "initialpose initial_pose",
-    "battery": "battery",
-}
+SEED_SYNONYMS = [SynonymTerm(word, action=a.name) for a in ACTIONS.values() for word in a.synonyms] + [
+    SynonymTerm(word, concept=concept) for concept, word in _CONCEPT_SYNONYMS.items()
+]
 
 SEED_KEYWORDS = [
-    KeywordTerm(action, keyword, 2.0 if keyword == action or "_" in keyword else 1.0)
-    for action, words in _KEYWORDS.items()
-    for keyword in words.split()
+    KeywordTerm(role.name, keyword, 2.0 if keyword == role.name or "_" in keyword else weight)
+    for role in ROLES.values()
+    for keyword, weight in role.keywords.items()
 ]
 
 

@@ -33,57 +33,20 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+from fleetcore.bindings import ESSENTIAL as ESSENTIAL_ROLES
+from fleetcore.bindings import NAV_ACTION_SERVERS, ROLES
 from robots.discovery import Graph, norm_type
 
-ACTIONS = ("move", "odometry", "pose", "navigate", "scan", "map", "initial_pose", "battery")
-ESSENTIAL = {"move", "odometry"}
+ACTIONS = tuple(ROLES)  # the binding roles (fleetcore/bindings.py): the one table of types and keywords
+ESSENTIAL = set(ESSENTIAL_ROLES)
 TIE = 1e-6
 MAX_WEIGHT = 1.5  # a TopicKeyword weight counts at most this much, so names never outweigh graph facts
 
 
-@dataclass(frozen=True)
-class Rule:
-    types: frozenset[str]
-    side: str  # "sub": we command it, somebody subscribes; "pub": we listen, somebody publishes
-    canonical: tuple[str, ...]
-
-
-RULES = {
-    "move": Rule(frozenset({"geometry_msgs/Twist", "geometry_msgs/TwistStamped"}), "sub", ("cmd_vel",)),
-    "odometry": Rule(frozenset({"nav_msgs/Odometry"}), "pub", ("odom", "odometry")),
-    "pose": Rule(
-        frozenset({"geometry_msgs/PoseWithCovarianceStamped", "geometry_msgs/PoseStamped"}),
-        "pub",
-        ("amcl_pose",),
-    ),
-    "navigate": Rule(frozenset({"geometry_msgs/PoseStamped"}), "sub", ("move_base_simple/goal", "goal_pose")),
-    "scan": Rule(frozenset({"sensor_msgs/LaserScan"}), "pub", ("scan",)),
-    "map": Rule(frozenset({"nav_msgs/OccupancyGrid"}), "pub", ("map",)),
-    "initial_pose": Rule(frozenset({"geometry_msgs/PoseWithCovarianceStamped"}), "sub", ("initialpose",)),
-    "battery": Rule(frozenset({"sensor_msgs/BatteryState"}), "pub", ("battery_state", "battery")),
-}
-NAV_ACTIONS = ("move_base", "navigate_to_pose")
-
-# The paper's keyword lists (Figure 12), per action; TopicKeyword rows replace them when present.
-DEFAULT_KEYWORDS = {
-    "move": {k: 1.0 for k in ("cmd", "vel", "cmd_vel", "velocity", "speed", "travel", "run")},
-    "navigate": {
-        k: 1.0 for k in ("move_base", "map_server", "amcl", "goal", "move", "navigation", "navigate")
-    },
-    "odometry": {"odom": 1.0, "odometry": 1.0},
-    "pose": {"amcl": 1.0, "pose": 1.0},
-    "scan": {"scan": 1.0, "laser": 1.0, "lidar": 1.0},
-    "map": {"map": 1.0},
-    "initial_pose": {"initialpose": 1.0, "initial": 1.0},
-    "battery": {"battery": 1.0, "power": 0.5},
-}
-DEFAULT_SYNONYMS = {
-    "move": {"drive", "motion", "twist", "go"},
-    "navigate": {"nav", "goto", "go_to"},
-    "odometry": {"localization", "dead_reckoning"},
-    "scan": {"range", "sick", "hokuyo"},
-    "battery": {"charge", "energy"},
-}
+RULES = ROLES
+NAV_ACTIONS = NAV_ACTION_SERVERS
+DEFAULT_KEYWORDS = {role.name: dict(role.keywords) for role in ROLES.values()}
+DEFAULT_SYNONYMS = {role.name: set(role.synonyms) for role in ROLES.values() if role.synonyms}
 NAV_NODES = {"move_base", "controller_server", "velocity_smoother", "bt_navigator"}
 TELEOP_WORDS = ("teleop", "joy", "marker", "keyboard")
 
