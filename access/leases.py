@@ -69,7 +69,7 @@ def take(user, robot, seconds: int | None = None) -> ControlLease:
         robot=robot, defaults={"user": user, "taken_at": now, "expires_at": now + timedelta(seconds=seconds)}
     )
     audit.record(user, "control.take", robot.name, taken_over_from=taken_over, seconds=seconds)
-    live.lease(robot)  # on commit: every page, and every socket's teleop grant for the robot, sees it
+    live.lease(robot, lease)  # on commit: every page, and every socket's teleop grant for the robot, sees it
     return lease
 
 
@@ -82,5 +82,5 @@ def release(user, robot) -> bool:
         raise ControlRefused(f"{robot.name} is held by {lease.user.username}, not by you.")
     lease.delete()
     audit.record(user, "control.release", robot.name)
-    live.lease(robot)
+    live.lease(robot, None)
     return True

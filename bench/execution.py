@@ -16,9 +16,9 @@ import itertools
 import math
 import time
 
-from bench import paper
-from bench.probe import Reception
-from bench.stats import summarize
+from experiments import paper
+from experiments.probe import Reception
+from experiments.stats import summarize
 
 FINAL = {"succeeded", "failed", "cancelled", "refused", "needs_user"}
 LEG_M = 0.8  # every robot's lane legs: equal distances near its start pose (the paper's equal-travel targets)
@@ -328,8 +328,8 @@ async def stop_queued(bench) -> dict:
 
 def profile_stop(names: list[str], user) -> tuple[float, str]:
     """cProfile execution.control.stop (what the WebSocket stop runs) on idle robots, in this process."""
-    from bench.stats import profile_calls
     from execution.control import stop
+    from experiments.stats import profile_calls
 
     per_call, body = profile_calls(lambda: stop(names, user, "bench"), 5)
     return (

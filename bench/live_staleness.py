@@ -9,7 +9,7 @@ import json
 import sys
 import time
 
-from bench.stats import summarize
+from experiments.stats import summarize
 
 
 async def client(url: str, cookie: str, origin: str, samples: list[float], stop: asyncio.Event) -> int:

@@ -9,7 +9,7 @@ import json
 import sys
 from pathlib import Path
 
-from bench import paper
+from experiments import paper
 
 RUN_FILE = "run.json"  # the run's mode, when and how long, and its experiments in order
 SUMMARY_KEYS = (

@@ -17,9 +17,9 @@ import traceback
 from pathlib import Path
 
 from bench import report
-from bench.drivers import DirectDriver, PortalDriver, Unavailable
-from bench.probe import Reception, sim_robot_link, watch_odometry
-from bench.response import ODOM_WATCH_MAX, command_latency, robots_scale, speed_grid
+from experiments.drivers import DirectDriver, PortalDriver, Unavailable
+from experiments.probe import Reception, sim_robot_link, watch_odometry
+from experiments.response import ODOM_WATCH_MAX, command_latency, robots_scale, speed_grid
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MODES = {
@@ -346,8 +346,8 @@ class Bench:
 
 def profile_teleop(name: str, user, calls: int = 200) -> tuple[float, str]:
     """cProfile a press's checks (execution.control.teleop_grant), what the portal runs once per press."""
-    from bench.stats import profile_calls
     from execution.control import teleop_grant
+    from experiments.stats import profile_calls
 
     per_call, body = profile_calls(lambda: teleop_grant(name, user), calls)
     return (

@@ -74,7 +74,7 @@ def execute(run: ExperimentRun) -> dict:
 
 def robot_link(robot):
     """A bench RobotLink from a registered robot's move and odometry bindings."""
-    from bench.probe import RobotLink
+    from experiments.probe import RobotLink
 
     bound = {b.action: b.target for b in robot.bindings.all() if b.target}
     missing = [a for a in ("move", "odometry") if a not in bound]
@@ -87,9 +87,9 @@ def robot_link(robot):
 
 async def _response(robots, params: dict) -> dict:
     """Start/stop response over the paper's speed grid (capped by each robot's limits), robot by robot."""
-    from bench.drivers import DirectDriver
-    from bench.probe import watch_odometry
-    from bench.response import speed_grid
+    from experiments.drivers import DirectDriver
+    from experiments.probe import watch_odometry
+    from experiments.response import speed_grid
     from robots.rosbridge import RosbridgeClient
 
     links = [robot_link(r) for r in robots]

@@ -6,3 +6,8 @@ class InterpreterConfig(AppConfig):
 
     def ready(self):
         from interpreter import signals  # noqa: F401 - connects the ontology and fleet version bumps
+        from interpreter.vocabulary import add_ontology_vocabulary
+        from robots import registration
+
+        if add_ontology_vocabulary not in registration.vocabulary_sources:
+            registration.vocabulary_sources.append(add_ontology_vocabulary)

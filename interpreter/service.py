@@ -221,11 +221,8 @@ _TEACHERS = {
 
 def _record_lesson(text: str, answer: Answer, meaning: str, user, instruction):
     from audit import records as audit
-    from execution.models import Instruction
     from interpreter.models import Lesson
 
-    if instruction is not None and not isinstance(instruction, Instruction):
-        instruction = Instruction.objects.filter(pk=instruction).first()
     who = user if getattr(user, "is_authenticated", False) else None
     lesson = Lesson.objects.create(
         taught_by=who,
@@ -233,11 +230,11 @@ def _record_lesson(text: str, answer: Answer, meaning: str, user, instruction):
         kind=answer.kind,
         word=answer.word,
         meaning=meaning,
-        instruction=instruction,
+        instruction_id=getattr(instruction, "pk", instruction),
     )
     details = {"lesson": lesson.pk, "kind": answer.kind, "meaning": meaning, "text": text[:200]}
     if instruction is not None:
-        details["instruction"] = instruction.pk
+        details["instruction"] = lesson.instruction_id
     audit.record(user, "ontology.teach", answer.word, **details)
     return lesson
 

@@ -147,11 +147,8 @@ class RegistrationProgress(TypedDict, total=False):
     ok: bool | None
 
 
-def lease(robot) -> None:
-    """A robot's control lease was taken, renewed, released or taken over."""
-    from access.models import ControlLease
-
-    current = ControlLease.objects.filter(robot=robot).select_related("user").first()
+def lease(robot, current=None) -> None:
+    """A robot's control lease was taken, renewed, released or taken over (current: the lease now, or None)."""
     active = current is not None and current.active
     payload = LeaseUpdate(
         type="lease.update",

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from django.conf import settings
-from django.db import DatabaseError, transaction
+from django.db import transaction
 from django.utils import timezone
 
 from audit import records as audit
@@ -21,6 +21,7 @@ from robots import identify, kinematics
 from robots.discovery import Graph, discover
 from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic
 from robots.rosbridge import RosbridgeClient, RosbridgeError
+from robots.signals import robots_registered
 
 log = logging.getLogger("robots.registration")
 ENDPOINT_TIMEOUT = 15.0  # a whole endpoint's discovery, beyond the per-call timeouts
@@ -68,8 +69,9 @@ def store_all(urls: list[str], found: list, user=None) -> list[EndpointResult]:
     """Store discovered graphs (or errors) and attach the current world's schedules."""
     vocab = load_vocabulary()
     results = [store_endpoint(url, graphs, vocab, user) for url, graphs in zip(urls, found, strict=True)]
-    if any(r.ok for r in results):
-        attach_world_schedules()
+    registered = [robot for result in results if result.ok for robot in result.robots]
+    if registered:
+        robots_registered.send(sender=Robot, robots=registered)
     return results
 
 
@@ -238,45 +240,17 @@ def mark_missing(url: str, namespaces: set[str]) -> list[str]:
     return [r.name for r in gone]
 
 
-# ----- vocabulary and world -----
+# ----- vocabulary -----
+# Where more topic keywords and synonyms come from (the interpreter adds the ontology's when its app loads).
+vocabulary_sources: list[Callable[[identify.Vocabulary], None]] = []
+
+
 def load_vocabulary() -> identify.Vocabulary:
-    """The paper's keywords, replaced per action by TopicKeyword rows; ontology synonyms added."""
-    from interpreter.models import Synonym, TopicKeyword
-
+    """The binding roles' keywords (fleetcore/bindings.py), with what each source adds or replaces."""
     vocab = identify.Vocabulary()
-    try:
-        rows = list(TopicKeyword.objects.values_list("action", "keyword", "weight"))
-        synonyms = list(
-            Synonym.objects.filter(action__name__in=identify.ACTIONS).values_list("action__name", "word")
-        )
-    except DatabaseError:
-        return vocab
-    from_db: dict[str, dict[str, float]] = {}
-    for action, keyword, weight in rows:
-        from_db.setdefault(action, {})[keyword] = weight
-    vocab.keywords.update(from_db)
-    for action, word in synonyms:
-        vocab.synonyms.setdefault(action, set()).add(word.replace(" ", "_"))
+    for source in vocabulary_sources:
+        source(vocab)
     return vocab
-
-
-def attach_world_schedules() -> int:
-    """Attach the current world's time slots to robots now registered, if its map is loaded."""
-    from places.models import Map
-    from places.worlds import load_schedules
-
-    name = getattr(settings, "FLEET_WORLD", "")
-    map_row = Map.objects.filter(name=name).first() if name else None
-    if map_row is None:
-        return 0
-    try:
-        from fleetcore.world import WorldFormatError, load_world
-
-        world = load_world(name)
-    except (ImportError, OSError, ValueError, WorldFormatError) as exc:
-        log.warning("world %s: schedules not attached (%s)", name, exc)
-        return 0
-    return load_schedules(world, map_row)
 
 
 # ----- presentation -----

@@ -7,8 +7,8 @@ from types import SimpleNamespace
 import pytest
 
 from bench import execution, report
-from bench.probe import RobotLink
 from bench.run import latency_why
+from experiments.probe import RobotLink
 
 
 def link(name="robot1", cmd="/robot1/cmd_vel", start=(-4.5, -1.5, 0.0), v=0.22):

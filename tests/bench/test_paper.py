@@ -2,7 +2,7 @@
 
 import pytest
 
-from bench import paper
+from experiments import paper
 
 SHAPES = {3: (8, 3), 4: (8, 3), 5: (8, 3), 6: (6, 3), 7: (3, 3), 8: (3, 3), 13: (3, 4), 14: (3, 4)}
 

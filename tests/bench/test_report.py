@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from bench import report
-from bench.stats import percentile, summarize
+from experiments.stats import percentile, summarize
 
 TINY = {
     "exp1_direct": {

@@ -13,8 +13,8 @@ from fleetcore.steps import SPEEDS, StepError, parse_task, speed_factor
 TB3 = Limits(0.22, 2.84)
 
 
-def simulate(controller, pose, dt=0.05, steps=4000):
-    """Integrate a unicycle under the controller's commands; return the final pose and the commands."""
+def simulate(controller, pose, dt=0.05, steps=20000):
+    """Integrate a unicycle under the controller's commands (up to 1,000 s: 14 m at "very slow" takes ~330 s)."""
     x, y, yaw = pose
     commands = []
     for _ in range(steps):

@@ -7,7 +7,7 @@ import asyncio
 import json
 import time
 
-from bench.probe import TWIST_TYPE, RobotLink, twist
+from experiments.probe import TWIST_TYPE, RobotLink, twist
 
 KEEPALIVE_S = 0.2
 

@@ -7,9 +7,9 @@ odometry sample showing the robot still. Received: command issued -> the simulat
 import asyncio
 import time
 
-from bench import paper
-from bench.probe import OdomWatch, Reception, RobotLink
-from bench.stats import p50_p99, summarize
+from experiments import paper
+from experiments.probe import OdomWatch, Reception, RobotLink
+from experiments.stats import p50_p99, summarize
 
 ODOM_WATCH_MAX = 16  # with more robots, watch the odometry of 16 of them (reception is timed for all)
 
