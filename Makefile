@@ -31,9 +31,11 @@ test: $(STAMP) $(JS_PROBE)
 bench: $(STAMP)
 	$(PY) -m bench.run --$(BENCH)
 
+## lint: style (ruff) and the layers of docs/ARCHITECTURE.md (import-linter; tests/test_architecture.py runs it too)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/lint-imports
 
 format: $(STAMP)
 	$(VENV)/bin/ruff format .
