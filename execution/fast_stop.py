@@ -19,6 +19,7 @@ import logging
 import time
 from dataclasses import dataclass
 
+from asgiref.sync import SyncToAsync, async_to_sync
 from channels.db import database_sync_to_async
 
 log = logging.getLogger(__name__)
@@ -29,6 +30,7 @@ RELOAD_S = 10.0
 @dataclass(frozen=True)
 class StopTarget:
     robot_id: int
+    name: str
     endpoint: str
     target: str
     message_type: str
@@ -52,6 +54,7 @@ def load_targets() -> dict[int, StopTarget]:
             cancel = f"{action_namespace(navigate.target)}/cancel"
         targets[robot.pk] = StopTarget(
             robot.pk,
+            robot.name,
             robot.endpoint,
             move.target,
             move.message_type or "geometry_msgs/Twist",
@@ -91,6 +94,18 @@ class Targets:
             opening = asyncio.ensure_future(pool.client(endpoint, connect_timeout=5.0))
             opening.add_done_callback(_quiet)  # a robot that is down is said by the stop itself
 
+    def ids(self, names) -> list[int] | str:
+        """The ids of the robots with these names ("all" stays "all"); names not known here are left out."""
+        if names == "all":
+            return "all"
+        wanted = set(names)
+        return [target.robot_id for target in self.by_robot.values() if target.name in wanted]
+
+    def load_now(self) -> None:
+        """Load the targets in this thread (a process that never had a page socket: the CLI, a worker)."""
+        self.by_robot = load_targets()
+        self.loaded_at = time.monotonic()
+
     def of(self, robot_ids) -> list[StopTarget]:
         if robot_ids == "all":
             return list(self.by_robot.values())
@@ -119,7 +134,7 @@ async def stop_now(robot_ids) -> int:
 
     async def zero(target: StopTarget) -> bool:
         try:
-            link = await pool.client(target.endpoint, connect_timeout=0.0)
+            link = await pool.client(target.endpoint, connect_timeout=0.0)  # up now, or skipped
             now = time.time()
             message = motion.velocity_message(0.0, 0.0, target.message_type, target.ros_version, now)
             await link.publish(target.target, message, target.message_type)
@@ -131,3 +146,21 @@ async def stop_now(robot_ids) -> int:
         return True
 
     return sum(await asyncio.gather(*(zero(target) for target in targets)))
+
+
+def stop_blocking(names, timeout: float = 2.0) -> int:
+    """stop_now for synchronous callers (the API, the CLI, a worker): flags and zeros before any database write.
+
+    Inside an ASGI request (a view running in a thread of the web process) it runs on the web process's own loop,
+    whose links the pages keep up; elsewhere on this process's rosbridge loop thread (robots.rosbridge.sync),
+    loading the targets first if this process never did. An unreachable robot never delays the others: each
+    zero is sent on its own link, none waits for a connection (connect_timeout 0).
+    """
+    if not TARGETS.by_robot:
+        TARGETS.load_now()
+    robot_ids = TARGETS.ids(names)
+    if getattr(SyncToAsync.threadlocal, "main_event_loop", None) is not None:
+        return async_to_sync(stop_now)(robot_ids)
+    from robots.rosbridge import sync
+
+    return sync.run(stop_now(robot_ids), timeout)

@@ -1,18 +1,22 @@
-"""Submitting an instruction: store it, interpret it, and hand it to execution (or say why not).
+"""Submitting an instruction: interpret it, store it and hand it to execution (or say why not), in one transaction.
 
-Stop instructions ("stop", "stop all", "stop husky") do not queue: they are carried out in the calling
-process before submit() returns (execution.control.stop). Everything else becomes one Execution per robot, run by
-the Celery workers (execution.tasks.execute_instruction).
+Stop instructions ("stop", "halt everything", "stop husky") do not queue: the robots' stop flags are raised and a
+zero velocity published from an event loop before any database write (execution.fast_stop, as the STOP button
+does), then execution.control.stop checks, stops again, cancels what was queued and audits. Everything else is
+checked against the step contract (fleetcore.steps) and becomes one Execution per robot, run by the Celery
+workers (execution.tasks.execute_instruction). A database that fails midway leaves no row behind.
 """
 
 from __future__ import annotations
 
+from django.db import transaction
 from django.utils import timezone
 
 import live
 from access.leases import ControlRefused
+from access.roles import can_control
 from audit import records as audit
-from execution import dispatch
+from execution import dispatch, fast_stop
 from execution.models import Instruction
 from fleetcore.states import Event
 from robots.models import Robot
@@ -28,18 +32,25 @@ def submit(
     text = (text or "").strip()
     if not text:
         raise ValueError("An instruction needs some text.")
+    result = parse if parse is not None else _interpret(text)
+    if _is_stop(result) and (user is None or can_control(user)):
+        fast_stop.stop_blocking(_stop_names(result))  # before any database write, like the button
+    with transaction.atomic():
+        return _store_and_dispatch(text, user, source, result, answer_to)
+
+
+def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to) -> Instruction:
     instruction = Instruction.objects.create(text=text, user=user, source=source, answer_to=answer_to)
     audit.record(user, "instruct", text[:255], instruction=instruction.pk, source=source)
     if answer_to is not None:
         close_dialog(answer_to, "answered")
-    result = parse if parse is not None else _interpret(text)
     instruction.parse = result
     instruction.type = result.get("type", "")
     instruction.interpreted_at = timezone.now()
     instruction.save(update_fields=["parse", "type", "interpreted_at"])
     if result.get("needs_user") or not result.get("valid", True):
         return _ask(instruction, result)
-    if any(step.get("action") == "stop" for step in result.get("steps", [])):
+    if _is_stop(result):
         return _stop(instruction, result, user)
     try:
         per_robot = dispatch.plan(result, user, check_schedule=source != "schedule")
@@ -86,16 +97,27 @@ def close_dialog(instruction: Instruction, reason: str) -> None:
         _close(instruction, Instruction.Status.CANCELLED, f"{instruction.outcome} ({reason})")
 
 
-def _stop(instruction: Instruction, result: dict, user) -> Instruction:
-    from execution.control import stop
+def _is_stop(result: dict) -> bool:
+    return any(step.get("action") == "stop" for step in result.get("steps", []))
 
+
+def _stop_names(result: dict) -> set[str] | str:
+    """The robots a stop instruction names, or "all" ("stop", "stop all", "halt everything")."""
     names = set()
     for step in result.get("steps", []):
         robots = step.get("robots")
-        if not isinstance(robots, list) or not robots:  # "stop", "stop all": every robot
-            names |= set(Robot.objects.values_list("name", flat=True))
-        else:
-            names |= set(robots)
+        if not isinstance(robots, list) or not robots:
+            return "all"
+        names |= set(robots)
+    return names
+
+
+def _stop(instruction: Instruction, result: dict, user) -> Instruction:
+    from execution.control import stop
+
+    names = _stop_names(result)
+    if names == "all":
+        names = set(Robot.objects.values_list("name", flat=True))
     if not names:
         return _close(instruction, Instruction.Status.REFUSED, "No robot is registered.")
     try:

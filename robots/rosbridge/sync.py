@@ -29,12 +29,17 @@ class LoopThread:
         self.clients: dict[str, SyncClient] = {}
         self.lock = threading.Lock()
 
-    def client(self, url: str) -> SyncClient:
-        """The shared client for url, created on first use."""
+    def client(self, url: str, connect_timeout: float = 2.0) -> SyncClient:
+        """The shared client for url, created on first use; waits for its link outside the lock.
+
+        No lock is held while connecting, so one unreachable endpoint never delays the callers of the others.
+        """
         with self.lock:
-            if url not in self.clients:
-                self.clients[url] = SyncClient(self, url)
-            return self.clients[url]
+            client = self.clients.get(url)
+            if client is None:
+                client = self.clients[url] = SyncClient(self, url)
+        client.ensure_connected(connect_timeout)
+        return client
 
     def run(self, coro, timeout: float | None = None):
         """Run a coroutine on the loop and wait for its result."""
@@ -57,11 +62,10 @@ class LoopThread:
 class SyncClient:
     """Blocking wrappers over one RosbridgeClient; safe to call from any thread."""
 
-    def __init__(self, runner: LoopThread, url: str, connect_timeout: float = 2.0) -> None:
+    def __init__(self, runner: LoopThread, url: str) -> None:
         self.runner, self.url = runner, url
         self.client = RosbridgeClient(url, reconnect=True, ping_interval=2.0)
-        runner.run(self.client.start())
-        runner.run(self.client.wait_connected(connect_timeout))
+        runner.run(self.client.start())  # connects (and reconnects) in the background
 
     def _run(self, coro, timeout: float | None = None):
         return self.runner.run(coro, timeout)
@@ -131,6 +135,11 @@ def shutdown() -> None:
         _runner.cache_clear()
 
 
-def get_client(url: str) -> SyncClient:
-    """Return this process's shared SyncClient for url (created and connected on first use)."""
-    return _runner(os.getpid()).client(url)
+def get_client(url: str, connect_timeout: float = 2.0) -> SyncClient:
+    """Return this process's shared SyncClient for url, connected (LinkDown after connect_timeout)."""
+    return _runner(os.getpid()).client(url, connect_timeout)
+
+
+def run(coro, timeout: float | None = None):
+    """Run a coroutine on this process's rosbridge loop thread and wait for its result."""
+    return _runner(os.getpid()).run(coro, timeout)

@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from robots.poses import PoseHub, compose, inverse, pose_of, stream_endpoint, yaw_of
+from fleetcore.geometry import compose, inverse, pose_of, yaw_of
+from robots.poses import PoseHub, stream_endpoint
 
 
 def odometry(x, y, yaw, v=0.0, w=0.0) -> dict:
