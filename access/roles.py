@@ -23,12 +23,14 @@ VIEW_PERMS = [
     "robots.view_statetransition",
     "access.view_controllease",
     "experiments.view_experimentrun",
+    "alerts.view_alert",
 ]
 OPERATOR_PERMS = [
     *VIEW_PERMS,
     "robots.control_robot",
     "execution.add_instruction",
     "experiments.add_experimentrun",
+    "alerts.change_alert",
 ]
 ADMIN_PERMS = [
     *OPERATOR_PERMS,
@@ -54,6 +56,8 @@ CONTROL_PERM = "robots.control_robot"
 REGISTER_PERM = "robots.register_robot"
 SCHEDULE_PERM = "execution.edit_schedule"
 AUDIT_PERM = "audit.view_auditentry"
+ALERT_VIEW_PERM = "alerts.view_alert"
+ALERT_HANDLE_PERM = "alerts.change_alert"  # acknowledge and resolve
 
 
 def role_of(user) -> str | None:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from django.core.cache import cache
 from django.utils import timezone
 
+import alerts
 from access import leases
 from access.leases import ControlRefused, check_stop
 from audit import records as audit
@@ -54,6 +55,9 @@ def stop(robots, user, source: str = "console") -> dict[str, str]:
         results = dict(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
     cancel_waiting(robots, "stopped")
     audit.record(user, "stop", ", ".join(r.name for r in robots)[:255], source=source, results=results)
+    if robots and len({robot.pk for robot in robots}) == Robot.objects.count():
+        who = getattr(user, "username", None) or "the system"
+        alerts.raise_alert("emergency_stop", None, f"every robot stopped by {who} ({source})")
     return results
 
 

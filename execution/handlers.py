@@ -10,18 +10,31 @@ from __future__ import annotations
 import math
 import time
 
+import alerts
 import live
-from execution.route import route
-from execution.steps import Blocked, Session, drive, follow_goal, navigate, travel_time
+from execution.route import reach_radius, route
+from execution.steps import (
+    STALL_S,
+    Session,
+    Stalled,
+    StepFailed,
+    drive,
+    follow_goal,
+    navigate,
+    travel_time,
+)
 from fleetcore import motion
 from fleetcore.states import Event
 from fleetcore.steps import Destination, Step, parse_task
+from robots import poses as pose_store
 from robots.models import Robot
 
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
-BLOCKED_S = 2.0  # s commanded without moving: something unplanned is in the way
-REROUTES, BACK_OFF_S = 2, 1.0
+STALL_TRIES, BACK_OFF_S = 2, 1.0  # after a stall: back off and plan again (or send the goal afresh) twice
+NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
+NEAR_M = 0.3  # m between two robots' reach discs: the other one is what stands in the way
 DOCK_LIMIT_S = 120.0
+STUCK = "robot_stuck"  # the alert kind a stall raises
 
 
 def go_to(session: Session, step: Step) -> str:
@@ -49,7 +62,10 @@ def task(session: Session, step: Step) -> str:
         limit = travel_time(
             motion.CLEAN_SIZE * (motion.CLEAN_LANES + 2), 2 * math.pi * 3, limits, step.factor
         )
-    drive(session, controller, limit)
+    try:
+        drive(session, controller, limit, stall_s=STALL_S)
+    except Stalled as exc:
+        raise StepFailed(_stuck(session, f"during {step.task or name} at {where}", str(exc))) from exc
     return f"{step.task or name} done at {where}"
 
 
@@ -61,7 +77,7 @@ def dock(session: Session, step: Step) -> str:
         session.check()
         goal = session.link.dock()
         session.mark_commanded()
-        follow_goal(session, goal, DOCK_LIMIT_S, "docking")
+        follow_goal(session, goal, DOCK_LIMIT_S, "docking", stall_s=NAV_STALL_S, toward=False)
         return "docked"
     x0, y0, _ = robot.start_pose or (0.0, 0.0, 0.0)
     _travel(session, Destination("home", x0, y0), step.factor)
@@ -78,31 +94,47 @@ def _where(step: Step) -> str:
 
 
 def _travel(session: Session, destination: Destination, factor: float) -> None:
+    """Get to the destination by the robot's own navigation or the route driver; a stall says what blocks it."""
     x, y, name = destination.x, destination.y, destination.name
     Robot.objects.transition(
         session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id
     )
     live.goal(session.robot, name, x, y)  # the map draws the goal until the robot is done with it
-    pose = session.pose()
     limits = session.link.limits()
-    distance = math.hypot(x - pose[0], y - pose[1])
     try:
         if session.link.nav_kind:
-            nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
-            navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
+            navigate_to(session, (x, y), limits)
         else:
             drive_route(session, (x, y), limits, factor)
+    except StepFailed as exc:
+        raise StepFailed(_explain(session, destination, exc)) from exc
     finally:
         live.goal(session.robot, None, None, None)
+
+
+def navigate_to(session: Session, goal: tuple[float, float], limits: motion.Limits) -> None:
+    """Hand the goal to the robot's nav stack; when it makes no progress, send it afresh (a new plan from
+    where the robot is, with what its sensors see now), up to STALL_TRIES times. A stack that aborts has
+    tried its own recoveries already: that ends the step."""
+    nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
+    for attempt in range(STALL_TRIES + 1):
+        pose = session.pose()
+        distance = math.dist(pose[:2], goal)
+        limit = travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear)
+        try:
+            navigate(session, *goal, limit, stall_s=NAV_STALL_S)
+            return
+        except Stalled as exc:
+            _stalled(session, exc, attempt)
 
 
 def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> None:
     """Drive a route leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal.
 
-    Blocked on the way (a robot that parked there after the plan was made), the robot backs off a little and
-    plans again from where it is, with the other robots' live poses, up to REROUTES times.
+    Stalled on the way (a robot that parked there after the plan was made), the robot backs off a little and
+    plans again from where it is, with the other robots' live poses, up to STALL_TRIES times.
     """
-    for attempt in range(REROUTES + 1):
+    for attempt in range(STALL_TRIES + 1):
         pose = session.pose()
         try:
             for x, y in route(session.robot, pose[:2], goal):
@@ -111,12 +143,65 @@ def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limi
                 tolerance = motion.TOLERANCE if last_leg else WAYPOINT_TOLERANCE
                 controller = motion.GoToGoal((x, y), limits, factor, tolerance)
                 limit = travel_time(math.hypot(x - pose[0], y - pose[1]), math.pi, limits, factor)
-                drive(session, controller, limit, blocked_s=BLOCKED_S)
+                drive(session, controller, limit, stall_s=STALL_S, goal=(x, y))
             return
-        except Blocked:
-            if attempt == REROUTES:
-                raise
+        except Stalled as exc:
+            _stalled(session, exc, attempt)
             back_off(session, limits)
+
+
+def _stalled(session: Session, exc: Stalled, attempt: int) -> None:
+    """A stall: the first one raises the robot_stuck alert; the last try's ends the step."""
+    if attempt == 0:
+        alerts.raise_alert(STUCK, session.robot, f"{exc} (trying again)")
+    if attempt == STALL_TRIES:
+        raise Stalled(f"{exc}, {STALL_TRIES} more tries", exc.pose)
+
+
+def _explain(session: Session, destination: Destination, exc: StepFailed) -> str:
+    """The failure in a person's words: the robot in the way when one stands at the goal or at the robot."""
+    blocked = isinstance(exc, Stalled) or str(exc).endswith("navigation aborted")
+    pose = getattr(exc, "pose", None) or session.link.poses.value
+    if not blocked or pose is None:
+        return str(exc)
+    detail = str(exc).removeprefix(f"{session.robot.name}: ")
+    other, where = in_the_way(session.robot, pose[:2], (destination.x, destination.y))
+    if other is None:
+        return f"{session.robot.name}: stuck on the way to {destination.name} ({detail})"
+    place = (
+        destination.name
+        if where == "goal"
+        else f"({pose[0]:.1f}, {pose[1]:.1f}) on the way to {destination.name}"
+    )
+    reason = f"{session.robot.name}: blocked by {other} at {place} ({detail})"
+    alerts.raise_alert(STUCK, session.robot, reason)
+    return reason
+
+
+def _stuck(session: Session, what: str, detail: str) -> str:
+    reason = f"{session.robot.name}: stuck {what} ({detail.removeprefix(session.robot.name + ': ')})"
+    alerts.raise_alert(STUCK, session.robot, reason)
+    return reason
+
+
+def in_the_way(robot: Robot, at: tuple[float, float], goal: tuple[float, float]) -> tuple[str | None, str]:
+    """(the name of the robot standing at the goal, or else next to `at`, by their last poses; "goal"/"here").
+
+    Two robots touch when their reach discs (half their footprints' diagonals) meet; NEAR_M more is allowed
+    for odometry and the pose store's age.
+    """
+    others = {other.pk: other for other in Robot.objects.exclude(pk=robot.pk).only("pk", "name", "footprint")}
+    poses = pose_store.last_poses(list(others))
+    mine = reach_radius(robot.footprint)
+    for spot, where in ((goal, "goal"), (at, "here")):
+        near = [
+            (math.dist(spot, (pose["x"], pose["y"])), others[pk].name)
+            for pk, pose in poses.items()
+            if math.dist(spot, (pose["x"], pose["y"])) < reach_radius(others[pk].footprint) + mine + NEAR_M
+        ]
+        if near:
+            return min(near)[1], where
+    return None, ""
 
 
 def back_off(session: Session, limits: motion.Limits) -> None:

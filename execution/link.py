@@ -149,6 +149,11 @@ class RobotLink:
     def _subscribe(self, topic: str, type_: str, callback) -> None:
         self._subs.append(self.client.subscribe(topic, type_, callback))
 
+    @property
+    def connected(self) -> bool:
+        """Whether the rosbridge link is up now (it reconnects by itself; subscriptions come back with it)."""
+        return self.client is not None and self.client.client.is_connected
+
     def close(self) -> None:
         for sub in self._subs:
             with contextlib.suppress(Exception):  # the link may be down; nothing else to release

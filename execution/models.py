@@ -1,5 +1,7 @@
 """Instructions, each robot's share of them (executions), and the robots' daily time slots."""
 
+from datetime import timedelta
+
 from django.conf import settings
 from django.db import models
 from django.utils import timezone
@@ -35,6 +37,22 @@ class TimeSlot(models.Model):
     def covers(self, moment) -> bool:
         """Whether the slot is running at this local time."""
         return self.enabled and self.start <= moment < self.end
+
+
+class InstructionQuerySet(models.QuerySet):
+    FINAL = ("refused", "succeeded", "failed", "cancelled")
+
+    def open(self):
+        """Not final yet: received, needs_user, queued or running."""
+        return self.exclude(status__in=self.FINAL)
+
+    def final(self):
+        return self.filter(status__in=self.FINAL)
+
+    def older_than(self, status: str, seconds: float, now=None, since: str = "received_at"):
+        """Instructions in this status whose `since` stamp is older than `seconds` (a sweep's deadline)."""
+        moment = (now or timezone.now()) - timedelta(seconds=seconds)
+        return self.filter(status=status, **{f"{since}__lt": moment})
 
 
 class Instruction(models.Model):
@@ -80,6 +98,8 @@ class Instruction(models.Model):
     outcome = models.TextField(blank=True, help_text="what happened, in words for a person")
     error = models.TextField(blank=True)
 
+    objects = InstructionQuerySet.as_manager()
+
     class Meta:
         ordering = ["-received_at"]
         indexes = [
@@ -106,6 +126,14 @@ class ExecutionQuerySet(models.QuerySet):
 
     def final(self):
         return self.filter(status__in=self.FINAL)
+
+    def waiting_for_offline_robots(self, seconds: float, now=None):
+        """Waiting executions of robots whose link is down and that nobody has seen for `seconds`."""
+        moment = (now or timezone.now()) - timedelta(seconds=seconds)
+        offline = models.Q(robot__last_seen__lt=moment) | models.Q(
+            robot__last_seen__isnull=True, robot__registered_at__lt=moment
+        )
+        return self.waiting().filter(offline, robot__link_status="offline")
 
     def current_work(self, robot_ids, running_only: bool = False) -> tuple[dict, dict]:
         """Per robot: the instruction it is working on ({id, text, status}) and its goal ({name, x, y})."""

@@ -15,6 +15,7 @@ import threading
 from django.db import close_old_connections, connections
 from django.utils import timezone
 
+import alerts
 import live
 from execution import coordination
 from execution.link import LinkError, RobotLink
@@ -71,11 +72,14 @@ def drain_robot(robot_id: int) -> bool:
         if not lock.acquire():
             return ran
         ran = True
+        heartbeat = coordination.Heartbeat(lock).start()
         try:
             preferred = None
-            while (execution := next_execution(robot_id, preferred)) is not None:
-                preferred = run_execution(execution, lock)
+            while heartbeat.held and (execution := next_execution(robot_id, preferred)) is not None:
+                heartbeat.beat()
+                preferred = run_execution(execution, heartbeat)
         finally:
+            heartbeat.stop()
             lock.release()
     return ran
 
@@ -107,18 +111,18 @@ def claim(execution: Execution, token: str) -> bool:
     return bool(won)
 
 
-def run_execution(execution: Execution, lock: coordination.RobotLock) -> int | None:
+def run_execution(execution: Execution, heartbeat: coordination.Heartbeat) -> int | None:
     """Run one execution from its current step; return the execution that preempted it, if any."""
     close_old_connections()
     coordination.clear_preempt(execution.robot_id, execution.pk)
-    if not claim(execution, lock.token):
+    if not claim(execution, heartbeat.token):
         return None
     execution.refresh_from_db()
     outcome, words, preemptor = "succeeded", [], None
     link = None
     try:
         link = RobotLink(execution.robot).open()
-        session = Session(execution, link, lock)
+        session = Session(execution, link, heartbeat)
         for index in range(execution.step_index, len(execution.steps)):
             words.append(run_step(session, execution.steps[index]))
             advance(execution, index + 1)
@@ -134,7 +138,10 @@ def run_execution(execution: Execution, lock: coordination.RobotLock) -> int | N
         words.append(f"{type(exc).__name__}: {exc}")
     finally:
         _halt(link)
-    finish(execution, lock.token, outcome, "; ".join(words))
+    if finish(execution, heartbeat.token, outcome, "; ".join(words)) and outcome == "failed":
+        alerts.raise_alert(
+            "step_failed", execution.robot, f"instruction #{execution.instruction_id}: {words[-1]}"
+        )
     return preemptor
 
 

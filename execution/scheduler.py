@@ -1,11 +1,14 @@
-"""The scheduler loop: scheduled time slots run by themselves; lost workers and stalled queues are handled.
+"""The scheduler loop: scheduled time slots run by themselves; lost executors, stalled queues and anything left
+unfinished are handled.
 
-One tick (every half second in `python manage.py scheduler`):
-1. the watchdog fails executions whose worker died (their robots get a zero velocity);
-2. robots with queued executions and no runner get a drain task;
-3. each enabled time slot that covers now and has not run today becomes an instruction (source "schedule");
-4. robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle in ready longer than
-   FLEET_IDLE_TIMEOUT_SECONDS go offline (they wake on the next instruction).
+Every WATCHDOG_S (a quarter second), the watchdog stops the robots of executors that stopped heartbeating and
+fails their executions ("executor lost"). One tick (every half second in `python manage.py scheduler`):
+1. robots with queued executions and no runner get a drain task;
+2. each enabled time slot that covers now and has not run today becomes an instruction (source "schedule");
+3. robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle in ready longer than
+   FLEET_IDLE_TIMEOUT_SECONDS go offline (they wake on the next instruction);
+4. the sweeps finish what has no owner any more (execution/sweeps.py: stale received instructions,
+   unanswered questions, work queued for robots offline, instructions whose settle was lost).
 
 The clock is injectable: Clock(start, scale) runs schedules time-compressed (tests, demos).
 """
@@ -22,7 +25,7 @@ from django.db import close_old_connections
 from django.db.models import Max
 from django.utils import timezone
 
-from execution import watchdog
+from execution import coordination, sweeps, watchdog
 from execution.models import TimeSlot
 from fleetcore.states import Event
 from robots.models import Robot
@@ -98,23 +101,41 @@ def expire_idle(now: datetime.datetime) -> None:
             Robot.objects.transition(robot.pk, event, f"{reason} for {limits[robot.state]:.0f} s")
 
 
+def watch() -> dict:
+    """The fast pass: robots of lost executors stopped, their executions failed."""
+    close_old_connections()
+    return {"recovered": watchdog.recover()}
+
+
 def tick(clock: Clock) -> dict:
     """One pass of the loop; return what it did (for logs and tests)."""
     close_old_connections()
     report = {"recovered": watchdog.recover(), "kicked": watchdog.kick_stalled()}
     report["scheduled"] = [instruction.pk for instruction in run_due_slots(clock.now())]
     expire_idle(timezone.now())
+    report.update(sweeps.sweep())
     return report
 
 
-def loop(clock: Clock, period: float = 0.5, should_stop=lambda: False) -> None:
-    """Tick until should_stop() says so; one failing tick is logged, not fatal."""
+def loop(
+    clock: Clock, period: float = 0.5, should_stop=lambda: False, watch_every: float = coordination.WATCHDOG_S
+) -> None:
+    """Watch every watch_every and tick every period until should_stop() says so; a failing pass is logged."""
+    next_tick = time.monotonic()
     while not should_stop():
         started = time.monotonic()
-        try:
-            report = tick(clock)
-            if any(report.values()):
-                log.info("scheduler: %s", report)
-        except Exception:
-            log.exception("scheduler tick failed")
-        time.sleep(max(0.0, period - (time.monotonic() - started)))
+        due = started >= next_tick
+        _logged(lambda: tick(clock) if due else watch())
+        if due:
+            next_tick = started + period
+        time.sleep(max(0.0, min(watch_every, period) - (time.monotonic() - started)))
+
+
+def _logged(run) -> None:
+    try:
+        report = run()
+    except Exception:
+        log.exception("scheduler pass failed")
+        return
+    if any(report.values()):
+        log.info("scheduler: %s", report)

@@ -2,7 +2,9 @@
 
 Each step runs through its action's handler (execution/handlers.py, named by fleetcore/actions.py).
 A Session carries what the control loop needs each tick: the next pose from odometry, the stop and preempt
-flags, the lock renewal, and the timing stamps (first command published, motion seen in odometry).
+flags, the heartbeat that keeps the robot's lock, and the timing stamps (first command published, motion seen
+in odometry). Every motion watches its own progress (Progress): no progress towards its goal for a while is a
+stall, and a motion that takes twice its expected time plus slack is late; both end it with a reason.
 """
 
 from __future__ import annotations
@@ -22,13 +24,26 @@ from fleetcore import geometry, motion
 from fleetcore.steps import Step
 from robots import poses as pose_store
 
-ODOMETRY_TIMEOUT = 1.0  # s without an odometry message fails the step
-RENEW_EVERY = 0.5  # s between lock renewals (the lock lives LOCK_TTL_MS)
+ODOMETRY_TIMEOUT = 3.0  # s without an odometry message fails the step ("no odometry for 3 s")
+ODOMETRY_GAP = 0.5  # s without odometry: the robot is told to stop while we wait, and the link is looked at
+STORE_POSE_EVERY = 0.5  # s between stores of the robot's own pose (the pose hub fills in between)
 MOVED, TURNED = 0.02, 0.05  # m, rad: motion seen in odometry
+PROGRESS_M, PROGRESS_RAD = 0.05, 0.15  # closer to the goal, or turned towards it, by this much: progress
+STALL_S = 3.0  # s without progress while commanded: the robot is stalled
+SLACK_S = 10.0  # s added to twice the expected time of a motion
+LINK_LOST = "link lost"
 
 
 class StepFailed(Exception):
     """The step cannot finish; the message says why, for a person."""
+
+
+class Stalled(StepFailed):
+    """The robot is commanded to move but makes no progress: something the plan did not know is in the way."""
+
+    def __init__(self, reason: str, pose: tuple[float, float, float]) -> None:
+        super().__init__(reason)
+        self.pose = pose
 
 
 class Interrupted(Exception):
@@ -43,10 +58,10 @@ class Interrupted(Exception):
 class Session:
     execution: Execution
     link: RobotLink
-    lock: coordination.RobotLock
+    heartbeat: coordination.Heartbeat
     started: float = field(default_factory=time.time)
     seen: int = 0
-    last_renew: float = field(default_factory=time.monotonic)
+    last_store: float = field(default_factory=time.monotonic)
     origin: tuple | None = None
     commanded: bool = False
     moving: bool = False
@@ -56,19 +71,35 @@ class Session:
         return self.link.robot
 
     def pose(self) -> tuple[float, float, float]:
-        pose, self.seen = self.link.next_pose(self.seen, ODOMETRY_TIMEOUT)
-        if pose is None:
-            topic = self.link.odometry.target
-            raise StepFailed(f"{self.robot.name}: no odometry on {topic} for {ODOMETRY_TIMEOUT:g} s")
-        self._note_motion(pose)
-        return pose
+        """The next odometry pose; a gap stops the robot while waiting, a dropped link or 3 s fail the step."""
+        waited = 0.0
+        while True:
+            self.heartbeat.beat()
+            pose, self.seen = self.link.next_pose(self.seen, ODOMETRY_GAP)
+            if pose is not None:
+                self._note_motion(pose)
+                return pose
+            waited += ODOMETRY_GAP
+            if not self.link.connected:
+                raise StepFailed(f"{self.robot.name}: {LINK_LOST} ({self.robot.endpoint} disconnected)")
+            self._zero()  # blind: never keep driving on a command given before odometry stopped
+            if waited >= ODOMETRY_TIMEOUT:
+                topic = self.link.odometry.target
+                raise StepFailed(f"{self.robot.name}: no odometry on {topic} for {ODOMETRY_TIMEOUT:g} s")
+
+    def _zero(self) -> None:
+        try:
+            self.link.halt()
+        except Exception as exc:  # the link went down between: said by the caller's next look at it
+            raise StepFailed(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
 
     def check(self) -> None:
-        """Raise Interrupted if the robot was stopped or preempted, or the lock was lost; renew it."""
-        if time.monotonic() - self.last_renew > RENEW_EVERY:
-            if not self.lock.renew():
-                raise Interrupted("failed", "lost the robot lock (another worker took over)")
-            self.last_renew = time.monotonic()
+        """Raise Interrupted if the robot was stopped or preempted, or its lock was lost; tell the heartbeat."""
+        if not self.heartbeat.held:
+            raise Interrupted("failed", "executor lost: its lock on the robot lapsed")
+        self.heartbeat.beat()
+        if time.monotonic() - self.last_store > STORE_POSE_EVERY:
+            self.last_store = time.monotonic()
             if self.link.poses.value is not None:
                 pose_store.store_pose(self.robot.pk, self.link.poses.value)
         stopped_at, preemptor = coordination.flags(self.robot.pk)
@@ -80,7 +111,12 @@ class Session:
     def send(self, v: float, w: float) -> None:
         """Publish a velocity command (after checking the flags, so a stop is never overridden)."""
         self.check()
-        self.link.velocity(v, w)
+        try:
+            self.link.velocity(v, w)
+        except Exception as exc:  # a publish on a dropped link: the step cannot go on
+            if not self.link.connected:
+                raise StepFailed(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
+            raise
         self.mark_commanded()
 
     def mark_commanded(self) -> None:
@@ -109,50 +145,99 @@ def _stamp(execution: Execution, field_name: str) -> None:
     )
 
 
-class Blocked(StepFailed):
-    """The robot is commanded to move but does not: something the plan did not know stands in the way."""
+@dataclass
+class Progress:
+    """A motion's progress towards its goal: stalled after `window` s without any, late after `limit` s.
 
-
-def drive(session: Session, controller, limit_s: float, blocked_s: float | None = None) -> None:
-    """Run a velocity controller tick by tick on odometry until it is done.
-
-    blocked_s: raise Blocked when the robot has not moved (2 cm, 3 degrees) for that long while commanded.
+    Progress is coming PROGRESS_M closer to the goal or turning PROGRESS_RAD towards it (a robot turns on the
+    spot before it drives); without a goal (a rotation, a pattern), any motion seen in odometry.
     """
-    deadline = time.monotonic() + limit_s
-    still_since, still_pose = time.monotonic(), None
+
+    limit: float
+    window: float = STALL_S
+    goal: tuple[float, float] | None = None
+    started: float = field(default_factory=time.monotonic)
+    since: float = field(default_factory=time.monotonic)
+    mark: tuple | None = None
+
+    def update(self, pose) -> str | None:
+        """Take a pose; return None while fine, "stalled" or "late" (to be said by the caller)."""
+        now = time.monotonic()
+        if self.mark is None or self._progressed(self.mark, pose):
+            self.mark, self.since = pose, now
+        if now - self.started > self.limit:
+            return "late"
+        if now - self.since > self.window:
+            return "stalled"
+        return None
+
+    def _progressed(self, before, after) -> bool:
+        if self.goal is None:
+            return _moved(before, after)
+        closer = math.dist(before[:2], self.goal) - math.dist(after[:2], self.goal)
+        return (
+            closer > PROGRESS_M
+            or _heading_error(before, self.goal) - _heading_error(after, self.goal) > PROGRESS_RAD
+        )
+
+
+def _heading_error(pose, goal) -> float:
+    return abs(geometry.wrap(math.atan2(goal[1] - pose[1], goal[0] - pose[0]) - pose[2]))
+
+
+def drive(session: Session, controller, limit_s: float, stall_s: float | None = None, goal=None) -> None:
+    """Run a velocity controller tick by tick on odometry until it is done, watching its progress.
+
+    stall_s: raise Stalled when the robot makes no progress (towards `goal`, or at all) for that long while
+    commanded; StepFailed when it has not finished within limit_s.
+    """
+    progress = Progress(limit_s, stall_s if stall_s is not None else math.inf, goal)
     while True:
         pose = session.pose()
         command = controller.command(pose)
         if command.done:
             session.link.halt()
             return
-        now = time.monotonic()
-        if now > deadline:
+        verdict = progress.update(pose)
+        if verdict == "late":
             session.link.halt()
             raise StepFailed(f"{session.robot.name}: did not finish within {limit_s:.0f} s")
-        if still_pose is None or _moved(still_pose, pose):
-            still_since, still_pose = now, pose
-        elif blocked_s is not None and now - still_since > blocked_s:
+        if verdict == "stalled":
             session.link.halt()
-            raise Blocked(f"{session.robot.name}: blocked near ({pose[0]:.1f}, {pose[1]:.1f})")
+            raise Stalled(
+                f"{session.robot.name}: blocked near ({pose[0]:.1f}, {pose[1]:.1f}): "
+                f"no progress for {progress.window:g} s",
+                pose,
+            )
         session.send(command.v, command.w)
 
 
 def _moved(before, after) -> bool:
-    return math.dist(before[:2], after[:2]) > 0.02 or abs(geometry.wrap(after[2] - before[2])) > 0.05
+    return math.dist(before[:2], after[:2]) > MOVED or abs(geometry.wrap(after[2] - before[2])) > TURNED
 
 
-def navigate(session: Session, x: float, y: float, limit_s: float) -> None:
+def navigate(session: Session, x: float, y: float, limit_s: float, stall_s: float | None = None) -> None:
     """Hand the goal to the robot's navigation stack and follow its status to the end."""
     session.check()
     goal = session.link.navigate(x, y, 0.0, f"fleet-{session.execution.pk}-{uuid.uuid4().hex[:8]}")
     session.mark_commanded()
-    follow_goal(session, goal, limit_s, "navigation")
+    follow_goal(session, goal, limit_s, "navigation", stall_s)
 
 
-def follow_goal(session: Session, goal, limit_s: float, what: str) -> None:
-    """Follow a goal the robot's own stack runs (navigation, docking) until it ends; cancel it on any exit."""
-    deadline = time.monotonic() + limit_s
+NAV_WORDS = {"failed": "aborted", "cancelled": "cancelled"}  # what a stack's outcome means to a person
+
+
+def follow_goal(
+    session: Session, goal, limit_s: float, what: str, stall_s: float | None = None, toward: bool = True
+) -> None:
+    """Follow a goal the robot's own stack runs (navigation, docking) until it ends; cancel it on any exit.
+
+    The stack recovers by itself from most trouble (it backs off and replans); stall_s is how long we let it
+    try without any progress (towards the goal's target, or without `toward` any motion) before this raises
+    Stalled.
+    """
+    target = goal.target if toward else None
+    progress = Progress(limit_s, stall_s if stall_s is not None else math.inf, target)
     try:
         while True:
             pose = session.pose()
@@ -160,18 +245,28 @@ def follow_goal(session: Session, goal, limit_s: float, what: str) -> None:
             outcome = session.link.goal_outcome(goal, pose)
             if outcome == "succeeded":
                 return
-            if outcome in ("failed", "cancelled"):
-                raise StepFailed(f"{session.robot.name}: {what} reports the goal {outcome}")
-            if time.monotonic() > deadline:
+            if outcome in NAV_WORDS:
+                raise StepFailed(f"{session.robot.name}: {what} {NAV_WORDS[outcome]}")
+            verdict = progress.update(pose)
+            if verdict == "late":
                 raise StepFailed(f"{session.robot.name}: {what} did not finish within {limit_s:.0f} s")
+            if verdict == "stalled":
+                raise Stalled(
+                    f"{session.robot.name}: {what} made no progress for {progress.window:g} s", pose
+                )
     except BaseException:
         session.link.halt(goal)
         raise
 
 
+def expected_time(distance: float, turn: float, limits: motion.Limits, factor: float) -> float:
+    """The time a motion takes at the robot's speed for this step."""
+    return distance / (limits.linear * factor) + turn / (limits.angular * factor)
+
+
 def travel_time(distance: float, turn: float, limits: motion.Limits, factor: float) -> float:
-    """A generous limit for a leg: three times the ideal time plus slack."""
-    return 3 * (distance / (limits.linear * factor) + turn / (limits.angular * factor)) + 10
+    """The limit of a motion: twice its expected time plus slack (accelerations, corners, a slow link)."""
+    return 2 * expected_time(distance, turn, limits, factor) + SLACK_S
 
 
 def run_step(session: Session, step: dict) -> str:

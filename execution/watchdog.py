@@ -1,18 +1,27 @@
-"""Find executions whose worker died, stop their robots and fail them; restart robots' stalled queues.
+"""Find executions whose executor is lost, stop their robots and fail them; restart robots' stalled queues.
 
-A running execution carries the token of the runner that claimed it, and that runner holds the robot's lock
-with the same token, renewing it every half second. When the lock is gone (or held by another token), the
-runner is gone: the robot gets a zero velocity, the execution is marked failed (never resumed silently: a
-robot that starts moving by itself after a crash is the worse surprise) and its instruction is settled.
+A running execution carries the token of the runner that claimed it, and that runner's heartbeat renews the
+robot's lock under the same token every quarter second (execution.coordination.Heartbeat). When the lock is
+gone (or held by another token), the executor is lost: killed, frozen, or its host gone. The scheduler process,
+which stays up, looks every WATCHDOG_S: the robot gets a zero velocity and its navigation goal is cancelled at
+once, the execution is failed with the reason "executor lost", its instruction settled, and an executor_lost
+alert raised.
+
+Failed, not resumed: the step was cut at an unknown point (half a rotation, a goal the stack may still hold),
+the robot may since have been moved or stopped by hand, and a robot that starts moving by itself after a
+crash is the worse surprise. A person sees the alert and sends the instruction again if it still makes sense
+(README, "Fault survival").
 """
 
 from __future__ import annotations
 
 import logging
+from concurrent.futures import ThreadPoolExecutor
 from datetime import timedelta
 
 from django.utils import timezone
 
+import alerts
 from execution import coordination
 from execution.link import publish_zero
 from execution.models import Execution
@@ -22,39 +31,59 @@ from robots.models import Robot
 
 log = logging.getLogger(__name__)
 STALLED_AFTER = 3.0  # s a queued execution may wait for its task before the robot is kicked
-LOST = "the worker running it was lost; the robot was stopped"
+LOST = "executor lost: the process running it stopped renewing its lock; the robot was stopped"
 
 
-def recover(robot_ids=None) -> list[int]:
-    """Fail running executions without a live runner; return their primary keys."""
+def lost_executions(robot_ids=None) -> list[Execution]:
+    """Running executions whose runner no longer holds the robot's lock (one query, one Redis round trip)."""
     running = Execution.objects.filter(status=Execution.Status.RUNNING).select_related("robot")
     if robot_ids is not None:
         running = running.filter(robot_id__in=list(robot_ids))
-    failed = []
-    for execution in running:
-        if coordination.lock_holder(execution.robot_id) == execution.worker:
-            continue
-        won = Execution.objects.filter(
-            pk=execution.pk, status=Execution.Status.RUNNING, worker=execution.worker
-        ).update(status=Execution.Status.FAILED, finished_at=timezone.now(), error=LOST)
-        if not won:
-            continue
-        failed.append(execution.pk)
-        try:
-            publish_zero(execution.robot)
-        except Exception as exc:  # report, and still settle the instruction
-            log.warning("%s: could not stop after a lost worker: %s", execution.robot.name, exc)
+    running = list(running)
+    holders = coordination.lock_holders({execution.robot_id for execution in running})
+    return [execution for execution in running if holders.get(execution.robot_id) != execution.worker]
+
+
+def recover(robot_ids=None) -> list[int]:
+    """Stop the robots of lost executions, fail those executions and settle them; return their keys."""
+    failed = [execution for execution in lost_executions(robot_ids) if _claim_failure(execution)]
+    if not failed:
+        return []
+    with ThreadPoolExecutor(max_workers=min(8, len(failed))) as pool:  # one unreachable robot delays no other
+        list(pool.map(_stop, [execution.robot for execution in failed]))
+    for execution in failed:
         Robot.objects.transition(execution.robot_id, Event.FAIL, LOST, execution.instruction_id)
         settle(execution.instruction_id)
-    return failed
+        alerts.raise_alert(
+            "executor_lost", execution.robot, f"instruction #{execution.instruction_id}: {LOST}"
+        )
+    return [execution.pk for execution in failed]
+
+
+def _claim_failure(execution: Execution) -> bool:
+    """Fail the execution unless its runner finished it meanwhile (a conditional update: one writer wins)."""
+    return bool(
+        Execution.objects.filter(
+            pk=execution.pk, status=Execution.Status.RUNNING, worker=execution.worker
+        ).update(status=Execution.Status.FAILED, finished_at=timezone.now(), error=LOST)
+    )
+
+
+def _stop(robot: Robot) -> None:
+    """Zero velocity and a move_base cancel (a nav2 goal is cancelled by rosbridge when its client dies)."""
+    try:
+        publish_zero(robot)
+    except Exception as exc:  # report, and still settle the instruction
+        log.warning("%s: could not stop after its executor was lost: %s", robot.name, exc)
 
 
 def stalled_robots() -> list[int]:
     """Robots with waiting executions and nobody holding their lock."""
     settled = timezone.now() - timedelta(seconds=STALLED_AFTER)  # give the task its time to be picked up
     waiting = Execution.objects.filter(status__in=WAITING, created_at__lt=settled)
-    robot_ids = set(waiting.values_list("robot_id", flat=True))
-    return sorted(rid for rid in robot_ids if coordination.lock_holder(rid) is None)
+    robot_ids = sorted(set(waiting.values_list("robot_id", flat=True)))
+    holders = coordination.lock_holders(robot_ids)
+    return [rid for rid in robot_ids if holders[rid] is None]
 
 
 def kick_stalled() -> list[int]:

@@ -47,6 +47,7 @@ INSTALLED_APPS = [
     "access",
     "places",
     "robots",
+    "alerts",
     "audit",
     "simworker",
 ]

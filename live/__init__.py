@@ -1,6 +1,6 @@
 """Every push to browsers goes through here: typed payloads sent to Channels groups after the commit.
 
-Groups: "fleet" (every dashboard) and "robot.<pk>" (a robot's page). Consumers only authenticate, join groups
+Groups: "fleet" (every dashboard), "robot.<pk>" (a robot's page) and "alerts" (every page's alert badge). Consumers only authenticate, join groups
 and forward; the handler name in the consumer matches the payload's "type".
 """
 
@@ -11,6 +11,7 @@ from channels.layers import get_channel_layer
 from django.db import transaction
 
 FLEET_GROUP = "fleet"
+ALERTS_GROUP = "alerts"
 
 
 def robot_group(robot_id: int) -> str:
@@ -43,6 +44,12 @@ class InstructionUpdate(TypedDict, total=False):
     text: str
     status: str
     outcome: str
+
+
+class AlertUpdate(TypedDict):
+    type: str  # "alert.update"
+    alert: dict  # alerts.service.as_dict: id, kind, severity, robot, message, count, status, who and when
+    open_count: int  # alerts open now, for every page's badge
 
 
 def send(group: str, payload: dict) -> None:
@@ -99,6 +106,11 @@ def instruction(instruction) -> None:
             outcome=instruction.outcome,
         ),
     )
+
+
+def alert(alert: dict, open_count: int) -> None:
+    """An alert was raised, repeated, acknowledged or resolved (every page shows a badge and a toast)."""
+    send_on_commit(ALERTS_GROUP, AlertUpdate(type="alert.update", alert=alert, open_count=open_count))
 
 
 # Poses travel on their own group: high-rate telemetry, one batched message per tick for the whole fleet.

@@ -85,3 +85,25 @@ def seeded_ontology(transactional_db):
 
     importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
     versions.bump_ontology()
+
+
+@pytest.fixture
+def pose_stream(demo_world):
+    """What the links process does for poses: every robot's odometry into the one store of last poses."""
+    import asyncio
+    import threading
+
+    from asgiref.sync import sync_to_async
+
+    from robots.models import Robot
+    from robots.poses import PoseHub, follow, store_poses
+
+    robots = list(Robot.objects.prefetch_related("bindings"))
+    loop = asyncio.new_event_loop()
+    stop = asyncio.Event()
+    hub = PoseHub(publish=sync_to_async(store_poses))
+    thread = threading.Thread(target=loop.run_until_complete, args=(follow(robots, hub, stop),), daemon=True)
+    thread.start()
+    yield hub
+    loop.call_soon_threadsafe(stop.set)
+    thread.join(10)

@@ -1,5 +1,7 @@
 """Hand-made interpreter results and waiting helpers for execution tests."""
 
+import dataclasses
+import math
 import time
 
 from execution.models import Instruction
@@ -47,3 +49,15 @@ def wait_for(predicate, timeout: float = 20.0, what: str = "condition"):
 def transitions(robot_name: str) -> list[tuple[str, str, str, int | None]]:
     rows = StateTransition.objects.filter(robot__name=robot_name).order_by("at", "pk")
     return list(rows.values_list("from_state", "to_state", "reason", "instruction_id"))
+
+
+def without_command_timeout(sim, name: str) -> None:
+    """Make a simulated robot keep its last velocity command for ever, like a base without cmd_vel timeout."""
+    body = sim.fleet.robots[name].body
+    sim.call(lambda: setattr(body, "profile", dataclasses.replace(body.profile, cmd_timeout=math.inf)))
+
+
+def at_rest(sim, name: str) -> bool:
+    """The simulated body has stopped, on a zero command (not only by its command timeout)."""
+    body = sim.fleet.robots[name].body
+    return sim.call(lambda: body.vx == 0.0 and body.wz == 0.0 and (body.cmd.vx, body.cmd.wz) == (0.0, 0.0))
