@@ -99,11 +99,18 @@ def pose_stream(demo_world):
     from robots.poses import PoseHub, follow, store_poses
 
     robots = list(Robot.objects.prefetch_related("bindings"))
-    loop = asyncio.new_event_loop()
-    stop = asyncio.Event()
     hub = PoseHub(publish=sync_to_async(store_poses))
-    thread = threading.Thread(target=loop.run_until_complete, args=(follow(robots, hub, stop),), daemon=True)
+    started = threading.Event()
+    state = {}
+
+    async def main():
+        state["loop"], state["stop"] = asyncio.get_running_loop(), asyncio.Event()
+        started.set()
+        await follow(robots, hub, state["stop"])
+
+    thread = threading.Thread(target=asyncio.run, args=(main(),), daemon=True)  # asyncio.run ends every task
     thread.start()
+    started.wait(5)
     yield hub
-    loop.call_soon_threadsafe(stop.set)
+    state["loop"].call_soon_threadsafe(state["stop"].set)
     thread.join(10)

@@ -102,10 +102,11 @@ def test_a_robot_sent_onto_a_parked_robot_fails_blocked_by_it_and_rests(
     )  # the slowest (nav) leg
     assert (final.finished_at - final.received_at).total_seconds() < deadline  # failed by the stall, in time
     assert wait_for(lambda: at_rest(sim, robot), timeout=2, what=f"{robot} at rest")
-    assert math.dist(sim.pose("husky")[:2], husky[:2]) < 0.1  # not pushed away
+    assert math.dist(sim.pose("husky")[:2], husky[:2]) < 0.3  # still there: a TurtleBot cannot push it away
     stuck = Alert.objects.open().get(kind="robot_stuck", robot__name=robot)
     assert "blocked by husky" in stuck.message
-    assert Alert.objects.open().filter(kind="step_failed", robot__name=robot).exists()
+    failed = Alert.objects.open().filter(kind="step_failed", robot__name=robot)
+    assert wait_for(failed.exists, timeout=5, what="the step_failed alert (raised after the settle)")
 
 
 def _known(robot) -> bool:
