@@ -20,8 +20,9 @@ import live
 from execution import coordination
 from execution.link import LinkError, RobotLink
 from execution.models import Execution, Instruction
-from execution.steps import Interrupted, Session, StepFailed, advance, run_step
+from execution.steps import Interrupted, LinkLost, Session, StepFailed, advance, run_step
 from fleetcore.states import Event
+from robots import links
 from robots.models import Robot
 
 log = logging.getLogger(__name__)
@@ -129,6 +130,10 @@ def run_execution(execution: Execution, heartbeat: coordination.Heartbeat) -> in
     except Interrupted as exc:
         outcome, preemptor = exc.outcome, exc.preemptor
         words.append(exc.reason)
+    except LinkLost as exc:  # it may still be driving on our last command: a zero as soon as it is back
+        links.owe_zero([execution.robot_id])
+        outcome = "failed"
+        words.append(str(exc))
     except (StepFailed, LinkError, ValueError) as exc:
         outcome = "failed"
         words.append(str(exc))

@@ -124,16 +124,17 @@ def loop(
     next_tick = time.monotonic()
     while not should_stop():
         started = time.monotonic()
-        due = started >= next_tick
-        _logged(lambda: tick(clock) if due else watch())
-        if due:
+        if started >= next_tick:
+            _logged(tick, clock)
             next_tick = started + period
+        else:
+            _logged(watch)
         time.sleep(max(0.0, min(watch_every, period) - (time.monotonic() - started)))
 
 
-def _logged(run) -> None:
+def _logged(run, *args) -> None:
     try:
-        report = run()
+        report = run(*args)
     except Exception:
         log.exception("scheduler pass failed")
         return

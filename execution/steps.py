@@ -9,6 +9,7 @@ stall, and a motion that takes twice its expected time plus slack is late; both 
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 import uuid
@@ -36,6 +37,10 @@ LINK_LOST = "link lost"
 
 class StepFailed(Exception):
     """The step cannot finish; the message says why, for a person."""
+
+
+class LinkLost(StepFailed):
+    """The robot's link dropped under the step: nothing we send reaches it until the link is back."""
 
 
 class Stalled(StepFailed):
@@ -81,7 +86,7 @@ class Session:
                 return pose
             waited += ODOMETRY_GAP
             if not self.link.connected:
-                raise StepFailed(f"{self.robot.name}: {LINK_LOST} ({self.robot.endpoint} disconnected)")
+                raise LinkLost(f"{self.robot.name}: {LINK_LOST} ({self.robot.endpoint} disconnected)")
             self._zero()  # blind: never keep driving on a command given before odometry stopped
             if waited >= ODOMETRY_TIMEOUT:
                 topic = self.link.odometry.target
@@ -90,8 +95,8 @@ class Session:
     def _zero(self) -> None:
         try:
             self.link.halt()
-        except Exception as exc:  # the link went down between: said by the caller's next look at it
-            raise StepFailed(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
+        except Exception as exc:  # the link went down between our look at it and the zero
+            raise LinkLost(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
 
     def check(self) -> None:
         """Raise Interrupted if the robot was stopped or preempted, or its lock was lost; tell the heartbeat."""
@@ -115,7 +120,7 @@ class Session:
             self.link.velocity(v, w)
         except Exception as exc:  # a publish on a dropped link: the step cannot go on
             if not self.link.connected:
-                raise StepFailed(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
+                raise LinkLost(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
             raise
         self.mark_commanded()
 
@@ -255,7 +260,8 @@ def follow_goal(
                     f"{session.robot.name}: {what} made no progress for {progress.window:g} s", pose
                 )
     except BaseException:
-        session.link.halt(goal)
+        with contextlib.suppress(Exception):  # a link that is down cannot take it; the first reason is kept
+            session.link.halt(goal)
         raise
 
 

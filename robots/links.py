@@ -5,6 +5,12 @@ so a restarted endpoint is back within about 2 s and every subscription made on 
 client itself. A change of link state is written to the endpoint's robots (link_status, last_seen) and pushed
 through live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT seconds.
 
+A link that drops raises a robot_offline alert for each robot behind it (resolved when it comes back), and
+every robot that was moving then (or whose executor failed its step with "link lost": owe_zero) is sent a
+zero velocity as soon as its link is back, before anything else can command it: a base without a command
+timeout would otherwise carry on with the last Twist it got. battery_hook raises low_battery alerts from a
+bound sensor_msgs/BatteryState.
+
 Extending: pass `hooks` to LinkManager; each hook is `async hook(client, robots)` and runs once when a link is
 created (robots: [{id, name, namespace, bindings: {action: (target, type)}}]). Subscriptions a hook makes
 survive reconnections (e.g. the pose stream subscribes each robot's odometry binding here).
@@ -15,13 +21,18 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
+import time
 from collections.abc import Awaitable, Callable, Iterable
 
 from asgiref.sync import sync_to_async
+from django.core.cache import cache
 from django.db import close_old_connections
 from django.utils import timezone
 
+import alerts
 import live
+from fleetcore import motion
 from fleetcore.states import Event
 from robots.models import Robot
 from robots.rosbridge import RosbridgeClient
@@ -29,6 +40,11 @@ from robots.rosbridge import RosbridgeClient
 log = logging.getLogger("robots.links")
 HEARTBEAT = 10.0  # seconds between last_seen refreshes of online robots
 REFRESH = 5.0  # seconds between looks for newly registered endpoints
+ZERO_OWED_KEY = "fleet:zero-owed:{id}"
+ZERO_OWED_S = 24 * 3600  # a robot away for longer than a day gets no zero when it comes back
+MOVING = (Robot.State.MOTION, Robot.State.WORK)
+LOW_BATTERY, BATTERY_OK = 0.2, 0.3  # fraction of charge: alert under the first, resolved over the second
+BATTERY_EVERY_MS = 10_000  # rosbridge throttle of the battery subscription
 
 Hook = Callable[[RosbridgeClient, list[dict]], Awaitable[None]]
 
@@ -47,12 +63,39 @@ def endpoint_robots(url: str) -> list[dict]:
     ]
 
 
-def set_link_status(url: str, up: bool) -> list[str]:
-    """Write the endpoint's robots' link status and push each change; return the robots changed."""
+def owe_zero(robot_ids) -> None:
+    """Remember to send these robots a zero velocity when their link is back (an executor lost its link)."""
+    cache.set_many({ZERO_OWED_KEY.format(id=pk): True for pk in robot_ids}, timeout=ZERO_OWED_S)
+
+
+def zeros_owed(url: str) -> list[dict]:
+    """The robots behind url owed a zero, with what it takes to send one: [{id, name, target, type, ros}]."""
+    close_old_connections()
+    robots = {r.pk: r for r in Robot.objects.filter(endpoint=url).prefetch_related("bindings")}
+    owed = cache.get_many([ZERO_OWED_KEY.format(id=pk) for pk in robots])
+    out = []
+    for pk, robot in robots.items():
+        move = next((b for b in robot.bindings.all() if b.action == "move" and b.target), None)
+        if ZERO_OWED_KEY.format(id=pk) in owed and move is not None:
+            out.append(
+                {"id": pk, "name": robot.name, "target": move.target, "type": move.message_type,
+                 "ros": robot.ros_version}
+            )  # fmt: skip
+    return out
+
+
+def paid_zero(robot_ids) -> None:
+    cache.delete_many([ZERO_OWED_KEY.format(id=pk) for pk in robot_ids])
+
+
+def set_link_status(url: str, up: bool, reason: str = "") -> list[str]:
+    """Write the endpoint's robots' link status, push and alert each change; return the robots changed."""
     close_old_connections()
     status = Robot.Link.ONLINE if up else Robot.Link.OFFLINE
     now = timezone.now()
     changed = []
+    if not up:  # before the state machine makes them offline: who was moving when the link dropped
+        owe_zero(Robot.objects.filter(endpoint=url, state__in=MOVING).values_list("pk", flat=True))
     for robot in Robot.objects.filter(endpoint=url).exclude(link_status=status):
         robot.link_status = status
         if up:
@@ -60,8 +103,30 @@ def set_link_status(url: str, up: bool) -> list[str]:
         robot.save(update_fields=["link_status", "last_seen", "updated_at"])
         live.robot_status(robot)
         changed.append(robot.name)
+        if up:
+            alerts.resolve_alert("robot_offline", robot, "link up again")
+        else:
+            alerts.raise_alert(
+                "robot_offline", robot, f"link to {url} lost{f' ({reason})' if reason else ''}"
+            )
     follow_link_in_state_machine(url, up)
     return changed
+
+
+async def pay_zeros(client: RosbridgeClient, url: str) -> list[str]:
+    """Send every robot behind url that is owed a zero its zero velocity, on the link just back up."""
+    owed = await sync_to_async(zeros_owed)(url)
+    for robot in owed:
+        message = motion.velocity_message(0.0, 0.0, robot["type"], robot["ros"], time.time())
+        try:
+            await client.publish(robot["target"], message, robot["type"] or "geometry_msgs/Twist")
+        except Exception as exc:  # down again: still owed, paid on the next reconnection
+            log.warning("%s: zero for %s not sent: %s", url, robot["name"], exc)
+            return []
+    await sync_to_async(paid_zero)([robot["id"] for robot in owed])
+    if owed:
+        log.info("%s: link back, zero velocity sent to %s", url, ", ".join(r["name"] for r in owed))
+    return [robot["name"] for robot in owed]
 
 
 def follow_link_in_state_machine(url: str, up: bool) -> None:
@@ -135,17 +200,59 @@ class LinkManager:
 
     def _changed(self, url: str, up: bool, reason: str) -> None:
         log.info("%s: link %s (%s)", url, "up" if up else "down", reason)
-        self.changes.put_nowait((url, up))
+        self.changes.put_nowait((url, up, reason))
 
     async def _write_changes(self) -> None:
         while True:
-            url, up = await self.changes.get()
+            url, up, reason = await self.changes.get()
             try:
-                await sync_to_async(set_link_status)(url, up)
+                if up and url in self.links:
+                    await pay_zeros(self.links[url], url)  # first: before the status lets anyone command it
+                await sync_to_async(set_link_status)(url, up, reason)
             except Exception:
                 log.exception("%s: could not store link status", url)
             finally:
                 self.changes.task_done()
+
+
+_BATTERY_CHECKS: set[asyncio.Task] = set()  # running checks, kept until done
+
+
+async def battery_hook(client: RosbridgeClient, robots: list[dict]) -> None:
+    """A LinkManager hook: follow each robot's bound battery (sensor_msgs/BatteryState), every 10 s at most."""
+    loop = asyncio.get_running_loop()
+    for robot in robots:
+        if "battery" not in robot["bindings"]:
+            continue
+        topic, type_ = robot["bindings"]["battery"]
+
+        def on_battery(message: dict, robot_id=robot["id"]) -> None:
+            task = loop.create_task(sync_to_async(check_battery)(robot_id, message))
+            _BATTERY_CHECKS.add(task)
+            task.add_done_callback(_BATTERY_CHECKS.discard)
+
+        await client.subscribe(
+            topic, type_ or "sensor_msgs/BatteryState", on_battery, throttle_rate=BATTERY_EVERY_MS
+        )
+
+
+def check_battery(robot_id: int, message: dict) -> str | None:
+    """Raise low_battery under LOW_BATTERY, resolve it over BATTERY_OK; return "low", "ok" or None."""
+    charge = message.get("percentage") if isinstance(message, dict) else None
+    if isinstance(charge, bool) or not isinstance(charge, int | float) or not math.isfinite(charge):
+        return None  # unknown charge (NaN is "not measured" in BatteryState)
+    charge = charge / 100 if charge > 1 else charge  # some drivers publish percent, not a fraction
+    close_old_connections()
+    robot = Robot.objects.filter(pk=robot_id).first()
+    if robot is None:
+        return None
+    if charge < LOW_BATTERY:
+        alerts.raise_alert("low_battery", robot, f"{robot.name}: battery at {charge:.0%}")
+        return "low"
+    if charge > BATTERY_OK:
+        alerts.resolve_alert("low_battery", robot, f"battery at {charge:.0%}")
+        return "ok"
+    return None
 
 
 async def wait_for_endpoints(

@@ -8,7 +8,7 @@ import signal
 from asgiref.sync import sync_to_async
 from django.core.management.base import BaseCommand, CommandError
 
-from robots.links import LinkManager, wait_for_endpoints
+from robots.links import LinkManager, battery_hook, wait_for_endpoints
 from robots.registration import discover_all, store_all
 
 
@@ -57,7 +57,7 @@ class Command(BaseCommand):
         from robots.poses import PoseHub, link_hook
 
         hub = PoseHub()  # live poses for the portal, from the links' own odometry subscriptions
-        manager = LinkManager(urls if only else None, hooks=[link_hook(hub)])
+        manager = LinkManager(urls if only else None, hooks=[link_hook(hub), battery_hook])
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, manager.stop)
