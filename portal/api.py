@@ -33,6 +33,7 @@ api = NinjaAPI(
 
 
 def _mount_routers():
+    from portal.api_alerts import router as alerts_router
     from portal.api_interpreter import router as interpreter_router
     from portal.api_robots import router as robots_router
     from portal.api_routes import router as fleet_router
@@ -40,6 +41,7 @@ def _mount_routers():
     api.add_router("/", fleet_router)
     api.add_router("/robots", robots_router)
     api.add_router("/interpreter", interpreter_router)
+    api.add_router("/alerts", alerts_router)
 
 
 _mount_routers()

@@ -13,7 +13,7 @@ from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncJsonWebsocketConsumer
 
 import live
-from access.roles import can_control
+from access.roles import ALERT_VIEW_PERM, can_control
 from execution import fast_stop
 from execution.held_teleop import HeldTeleop
 from portal import snapshots
@@ -249,3 +249,27 @@ class RobotConsumer(_PageConsumer):
         mine = [pose for pose in event["poses"] if pose["id"] == self.robot_id]
         if mine:
             await self.send_json({"type": "robots.poses", "poses": mine})
+
+
+class AlertsConsumer(AsyncJsonWebsocketConsumer):
+    """/ws/alerts/ on every page: the open alerts first, then each raise, acknowledgement and resolution."""
+
+    async def connect(self):
+        await self.accept()
+        user = self.scope.get("user")
+        if user is None or not user.is_authenticated:
+            await self.close(code=4401)
+            return
+        if not await database_sync_to_async(user.has_perm)(ALERT_VIEW_PERM):
+            await self.close(code=4403)
+            return
+        await self.channel_layer.group_add(live.ALERTS_GROUP, self.channel_name)
+        self.joined = True
+        await self.send_json(await database_sync_to_async(snapshots.alerts_snapshot)())
+
+    async def disconnect(self, code):
+        if getattr(self, "joined", False):
+            await self.channel_layer.group_discard(live.ALERTS_GROUP, self.channel_name)
+
+    async def alert_update(self, event):
+        await self.send_json(event)

@@ -84,3 +84,16 @@ def robot_snapshot(robot) -> dict:
             for record in transitions
         ],
     }
+
+
+def alerts_snapshot(limit: int = 20) -> dict:
+    """What every page's alert badge starts from: the open count and the newest open alerts."""
+    from alerts import service
+    from alerts.models import Alert
+
+    rows = Alert.objects.open().select_related("robot", "acknowledged_by", "resolved_by")[:limit]
+    return {
+        "type": "alerts.snapshot",
+        "open_count": service.open_count(),
+        "alerts": [service.as_dict(alert) for alert in rows],
+    }

@@ -15,6 +15,7 @@ urlpatterns = [
     path("schedules/", views.schedules, name="schedules"),
     path("history/", views.history, name="history"),
     path("audit/", views.audit, name="audit"),
+    path("alerts/", views.alerts, name="alerts"),
     path("experiments/", views_experiments.experiments, name="experiments"),
     path("control/stop/", views.stop, name="stop"),
 ]

@@ -13,7 +13,8 @@ from django.http import JsonResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.views.decorators.http import require_POST
 
-from access.roles import AUDIT_PERM, REGISTER_PERM
+from access.roles import ALERT_HANDLE_PERM, ALERT_VIEW_PERM, AUDIT_PERM, REGISTER_PERM
+from alerts.models import Alert
 from audit.models import AuditEntry
 from execution.models import Instruction, TimeSlot
 from places.models import Location, Map
@@ -225,6 +226,20 @@ def audit(request):
         "query": _query_without_page(request),
     }
     return render(request, "fleet/audit.html", context)
+
+
+def alerts(request):
+    """Incidents: the open ones first, then the resolved ones, newest first; operators act on them here."""
+    if not request.user.has_perm(ALERT_VIEW_PERM):
+        raise PermissionDenied("You may not view alerts.")
+    related = ("robot", "acknowledged_by", "resolved_by")
+    resolved = Paginator(Alert.objects.resolved().select_related(*related), 50).get_page(request.GET.get("page"))
+    context = {
+        "open_alerts": Alert.objects.open().select_related(*related),
+        "page": resolved,
+        "can_handle": request.user.has_perm(ALERT_HANDLE_PERM),
+    }
+    return render(request, "fleet/alerts.html", context)
 
 
 def _answer(request, ok: bool, detail: str, status: int = 200, **extra):

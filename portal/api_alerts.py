@@ -1,0 +1,75 @@
+"""Alerts in the JSON API: viewers list them, operators acknowledge and resolve them (both audited)."""
+
+from datetime import datetime
+
+from ninja import Router, Schema
+from ninja.errors import HttpError
+
+from access.roles import ALERT_HANDLE_PERM, ALERT_VIEW_PERM, require_perm
+from alerts import service
+from alerts.models import Alert
+
+router = Router(tags=["alerts"])
+
+LISTS = {  # ?status= -> the alerts it shows
+    "open": lambda: Alert.objects.open(),
+    "unacknowledged": lambda: Alert.objects.unacknowledged(),
+    "resolved": lambda: Alert.objects.resolved(),
+    "all": lambda: Alert.objects.all(),
+}
+
+
+class AlertOut(Schema):
+    id: int
+    kind: str
+    kind_label: str
+    severity: str
+    robot: str | None
+    robot_id: int | None
+    message: str
+    count: int
+    raised_at: datetime
+    last_raised_at: datetime
+    status: str
+    acknowledged_by: str | None
+    acknowledged_at: datetime | None
+    resolved_by: str | None
+    resolved_at: datetime | None
+    resolution: str
+
+
+class ResolveIn(Schema):
+    note: str = ""
+
+
+@router.get("", response=list[AlertOut])
+def list_alerts(request, status: str = "open", limit: int = 100):
+    """Alerts, newest first: open (default), unacknowledged, resolved or all."""
+    require_perm(request, ALERT_VIEW_PERM)
+    if status not in LISTS:
+        raise HttpError(422, f"status: expected one of {', '.join(LISTS)}, got {status!r}")
+    rows = LISTS[status]().select_related("robot", "acknowledged_by", "resolved_by")[
+        : max(1, min(limit, 500))
+    ]
+    return [service.as_dict(alert) for alert in rows]
+
+
+@router.post("/{alert_id}/acknowledge", response=AlertOut)
+def acknowledge(request, alert_id: int):
+    """Take the alert on (it stays open until resolved)."""
+    require_perm(request, ALERT_HANDLE_PERM)
+    return service.as_dict(_apply(service.acknowledge, alert_id, request.user))
+
+
+@router.post("/{alert_id}/resolve", response=AlertOut)
+def resolve(request, alert_id: int, payload: ResolveIn | None = None):
+    """Close the alert, with a note on what was done."""
+    require_perm(request, ALERT_HANDLE_PERM)
+    return service.as_dict(_apply(service.resolve, alert_id, request.user, payload.note if payload else ""))
+
+
+def _apply(action, alert_id: int, *args) -> Alert:
+    try:
+        return action(alert_id, *args)
+    except service.AlertError as exc:
+        raise HttpError(404 if "no such" in str(exc) else 409, str(exc)) from exc
