@@ -155,7 +155,7 @@ def _stalled(session: Session, exc: Stalled, attempt: int) -> None:
     if attempt == 0:
         alerts.raise_alert(STUCK, session.robot, f"{exc} (trying again)")
     if attempt == STALL_TRIES:
-        raise Stalled(f"{exc}, {STALL_TRIES} more tries", exc.pose)
+        raise Stalled(f"{exc}; tried {STALL_TRIES + 1} times", exc.pose)
 
 
 def _explain(session: Session, destination: Destination, exc: StepFailed) -> str:

@@ -210,8 +210,7 @@ def drive(session: Session, controller, limit_s: float, stall_s: float | None = 
         if verdict == "stalled":
             session.link.halt()
             raise Stalled(
-                f"{session.robot.name}: blocked near ({pose[0]:.1f}, {pose[1]:.1f}): "
-                f"no progress for {progress.window:g} s",
+                f"{session.robot.name}: no progress for {progress.window:g} s near ({pose[0]:.1f}, {pose[1]:.1f})",
                 pose,
             )
         session.send(command.v, command.w)
