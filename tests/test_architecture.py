@@ -14,7 +14,7 @@ import fleetcore
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = [
     "bench", "fleet", "portal", "experiments", "execution", "interpreter", "access", "places", "robots",
-    "audit", "live", "fleetcore", "simworker",
+    "alerts", "audit", "live", "fleetcore", "simworker",
 ]  # fmt: skip
 LINT_IMPORTS = Path(sys.executable).with_name("lint-imports")
 

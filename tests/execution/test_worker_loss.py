@@ -140,8 +140,9 @@ def test_killed_worker_leaves_the_robot_at_rest_and_the_instruction_failed(
     assert (execution.status, execution.error) == ("failed", watchdog.LOST)
     assert "executor lost" in Instruction.objects.get(pk=instruction.pk).outcome
     assert transitions("turtlebot")[-1][:3] == ("motion", "ready", watchdog.LOST)
-    alert = Alert.objects.open().get(kind="executor_lost")
-    assert alert.robot.name == "turtlebot" and f"#{instruction.pk}" in alert.message
+    lost = Alert.objects.open().filter(kind="executor_lost")
+    wait_for(lost.exists, timeout=5, what="the executor_lost alert (raised after the settle)")
+    assert lost.get().robot.name == "turtlebot" and f"#{instruction.pk}" in lost.get().message
     parked = sim.pose("turtlebot")
     wait_for(lambda: sim.call(lambda: sim.fleet.physics.time) > killed_at + 4.0, timeout=10, what="a while")
     assert math.dist(sim.pose("turtlebot")[:2], parked[:2]) < 0.01  # and it stays at rest

@@ -1,4 +1,4 @@
-"""`python manage.py scheduler`: the loop that runs schedules and watches workers (SIGTERM stops it cleanly)."""
+"""`python manage.py scheduler`: the loop that watches executors and runs schedules (SIGTERM stops it cleanly)."""
 
 import datetime
 import signal
@@ -10,7 +10,7 @@ from execution.scheduler import Clock, loop
 
 
 class Command(BaseCommand):
-    help = "Run scheduled time slots, fail executions of lost workers, restart stalled robot queues."
+    help = "Stop the robots of lost executors (every 0.25 s), run time slots, restart stalled queues, sweep."
 
     def add_arguments(self, parser):
         parser.add_argument("--period", type=float, default=0.5, help="seconds between ticks")
