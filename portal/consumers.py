@@ -248,4 +248,4 @@ class RobotConsumer(_PageConsumer):
     async def fleet_poses(self, event):
         mine = [pose for pose in event["poses"] if pose["id"] == self.robot_id]
         if mine:
-            await self.send_json({"type": "robots.poses", "poses": mine})
+            await self.send_json({"type": "fleet.poses", "poses": mine})

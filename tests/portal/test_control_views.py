@@ -20,7 +20,7 @@ def fake_control(monkeypatch):
     """Record what reaches execution.control instead of talking to robots; the checks are the real ones."""
     import importlib
 
-    import fleet
+    import execution
 
     real = importlib.import_module("execution.control")
     calls = []
@@ -39,7 +39,7 @@ def fake_control(monkeypatch):
             return v, w
 
     monkeypatch.setitem(__import__("sys").modules, "execution.control", Control)
-    monkeypatch.setattr(fleet, "control", Control, raising=False)
+    monkeypatch.setattr(execution, "control", Control, raising=False)
     return calls
 
 

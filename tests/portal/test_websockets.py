@@ -218,7 +218,7 @@ async def test_a_held_teleop_is_rechecked_while_held(
     from execution import control
 
     monkeypatch.setattr(control, "GRANT_S", 0.4)
-    monkeypatch.setattr(live, "lease", lambda robot: None)  # the push is lost
+    monkeypatch.setattr(live, "lease", lambda robot, lease=None: None)  # the push is lost
     turtlebot = fleet["turtlebot"]
     communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
     await communicator.receive_json_from(timeout=5)
@@ -270,7 +270,7 @@ async def test_a_link_that_is_down_is_said_in_words(operator, fleet):
 @pytest.fixture
 def recorded(monkeypatch):
     """The order things happen in a stop: zeros published from the loop, then control.stop in a thread."""
-    import fleet
+    import execution
 
     events = []
     _record_publishes(
@@ -285,7 +285,7 @@ def recorded(monkeypatch):
             return {robot.name: "stopped" for robot in robots}
 
     monkeypatch.setitem(__import__("sys").modules, "execution.control", Control)
-    monkeypatch.setattr(fleet, "control", Control, raising=False)
+    monkeypatch.setattr(execution, "control", Control, raising=False)
     return events
 
 
