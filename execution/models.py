@@ -155,6 +155,7 @@ class Execution(models.Model):
     first_command_at = models.DateTimeField(null=True, blank=True)
     motion_started_at = models.DateTimeField(null=True, blank=True)
     finished_at = models.DateTimeField(null=True, blank=True)
+    outcome = models.TextField(blank=True, help_text="what the robot did, in words (its handlers' answers)")
     error = models.TextField(blank=True)
 
     objects = ExecutionQuerySet.as_manager()

@@ -56,6 +56,7 @@ class Migration(migrations.Migration):
                 ('first_command_at', models.DateTimeField(blank=True, null=True)),
                 ('motion_started_at', models.DateTimeField(blank=True, null=True)),
                 ('finished_at', models.DateTimeField(blank=True, null=True)),
+                ('outcome', models.TextField(blank=True, help_text="what the robot did, in words (its handlers' answers)")),
                 ('error', models.TextField(blank=True)),
                 ('robot', models.ForeignKey(on_delete=django.db.models.deletion.CASCADE, related_name='executions', to='robots.robot')),
                 ('instruction', models.ForeignKey(on_delete=django.db.models.deletion.CASCADE, related_name='executions', to='execution.instruction')),
