@@ -60,7 +60,7 @@ def test_broken_urdf_is_reported_not_fatal(endpoint):
     (robot,) = run(discover(endpoint(build=broken).url))
     assert robot.urdf is None
     assert "not XML" in robot.urdf_error
-    assert robot.name.startswith("127.0.0.1-")  # no URDF name: host-port
+    assert robot.name == ""  # no URDF name: registration names it after its model, never host:port
     assert "/cmd_vel" in robot.topics
 
 
