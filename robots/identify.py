@@ -170,6 +170,8 @@ def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:
             rule = RULES[action]
             if not (info.subscribers if rule.side == "sub" else info.publishers):
                 continue
+            if action == "navigate" and name not in facts.nav_subscribed:
+                continue  # a goal topic no navigation stack consumes (Spot's body-frame go_to_pose) moves nothing
             score, how = name_score(graph.relative(name), action, vocab, rule.canonical)
             extra = FACT_RULES.get(action)
             total = 0.5 + score + (extra(name, facts) if extra else 0.0)
