@@ -56,8 +56,9 @@ class Instruction(models.Model):
         SUCCEEDED = "succeeded"
         FAILED = "failed"
         CANCELLED = "cancelled"
+        ANSWERED = "answered"  # a question the person answered: the answer ran as a new instruction
 
-    FINAL = (Status.REFUSED, Status.SUCCEEDED, Status.FAILED, Status.CANCELLED)
+    FINAL = (Status.REFUSED, Status.SUCCEEDED, Status.FAILED, Status.CANCELLED, Status.ANSWERED)
 
     text = models.TextField()
     user = models.ForeignKey(settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL)

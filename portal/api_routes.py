@@ -54,6 +54,7 @@ class TimeSlotIn(Schema):
 
 class InstructionIn(Schema):
     text: str = Field(min_length=1, max_length=2000)
+    answer_to: int | None = Field(None, description="the instruction whose question this answers (it closes)")
 
 
 class InstructionOut(Schema):
@@ -140,4 +141,7 @@ def create_instruction(request, payload: InstructionIn):
     require_perm(request, CONTROL_PERM)
     from execution.instructions import submit
 
-    return Status(201, submit(payload.text, request.user, source="api"))
+    answer_to = None
+    if payload.answer_to is not None:
+        answer_to = get_object_or_404(Instruction, pk=payload.answer_to, status=Instruction.Status.NEEDS_USER)
+    return Status(201, submit(payload.text, request.user, source="api", answer_to=answer_to))

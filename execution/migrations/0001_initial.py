@@ -24,7 +24,7 @@ class Migration(migrations.Migration):
                 ('text', models.TextField()),
                 ('parse', models.JSONField(blank=True, default=dict)),
                 ('type', models.CharField(blank=True, choices=[('I', 'I: plain'), ('II', 'II: synonym'), ('III', 'III: semantic issue'), ('IV', 'IV: synonym and semantic issue'), ('V', 'V: not programmed')], max_length=3)),
-                ('status', models.CharField(choices=[('received', 'Received'), ('needs_user', 'Needs User'), ('refused', 'Refused'), ('queued', 'Queued'), ('running', 'Running'), ('succeeded', 'Succeeded'), ('failed', 'Failed'), ('cancelled', 'Cancelled')], default='received', max_length=12)),
+                ('status', models.CharField(choices=[('received', 'Received'), ('needs_user', 'Needs User'), ('refused', 'Refused'), ('queued', 'Queued'), ('running', 'Running'), ('succeeded', 'Succeeded'), ('failed', 'Failed'), ('cancelled', 'Cancelled'), ('answered', 'Answered')], default='received', max_length=12)),
                 ('source', models.CharField(default='console', help_text='console, api, cli, schedule, teleop', max_length=20)),
                 ('received_at', models.DateTimeField(default=django.utils.timezone.now)),
                 ('interpreted_at', models.DateTimeField(blank=True, null=True)),

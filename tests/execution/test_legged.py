@@ -24,7 +24,9 @@ def spot_world(exec_settings, transactional_db):
 
 
 def test_move_spot_moves_spot(spot_world, fleet_admin):
-    assert not Binding.objects.get(robot__name="spot", action="navigate").target  # go_to_pose is not navigation
+    assert not Binding.objects.get(
+        robot__name="spot", action="navigate"
+    ).target  # go_to_pose is not navigation
     Location.objects.create(map=Location.objects.first().map, name="Porch", x=3.0, y=1.5)
     start = spot_world.call(spot_world.fleet.robots["spot"].pose)
     instruction = wait_final(submit("move spot to Porch", fleet_admin), timeout=100)
