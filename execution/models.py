@@ -8,6 +8,12 @@ from places.models import Location
 from robots.models import Robot
 
 
+class TimeSlotQuerySet(models.QuerySet):
+    def running_at(self, local_time):
+        """Enabled slots running at this local wall-clock time (schedules are in local time)."""
+        return self.filter(enabled=True, start__lte=local_time, end__gt=local_time)
+
+
 class TimeSlot(models.Model):
     """A daily slot in which a robot goes to a goal and does a task (the paper's Tables 2 and 12)."""
 
@@ -18,6 +24,8 @@ class TimeSlot(models.Model):
     task = models.CharField(max_length=50, blank=True, help_text="e.g. rotate(5) or clean")
     enabled = models.BooleanField(default=True)
     last_run_on = models.DateField(null=True, blank=True)
+
+    objects = TimeSlotQuerySet.as_manager()
 
     class Meta:
         ordering = ["robot", "start"]
@@ -31,10 +39,6 @@ class TimeSlot(models.Model):
 
     def __str__(self):
         return f"{self.robot} {self.start:%H:%M}-{self.end:%H:%M} {self.goal} {self.task}".strip()
-
-    def covers(self, moment) -> bool:
-        """Whether the slot is running at this local time."""
-        return self.enabled and self.start <= moment < self.end
 
 
 class Instruction(models.Model):
