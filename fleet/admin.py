@@ -1,3 +1,5 @@
+"""The Django admin: staff users edit what their role's permissions allow (fleet.roles gives the groups them)."""
+
 from django.contrib import admin
 
 from fleet.models import (
@@ -11,6 +13,7 @@ from fleet.models import (
     StateTransition,
     TimeSlot,
 )
+from fleet.roles import may
 
 
 class LocationInline(admin.TabularInline):
@@ -75,12 +78,24 @@ class ControlLeaseAdmin(admin.ModelAdmin):
 
 @admin.register(AuditEntry)
 class AuditEntryAdmin(admin.ModelAdmin):
+    """Read-only: the audit trail is append-only (fleet.models.AuditEntry refuses changes below the admin too)."""
+
     list_display = ("at", "user", "action", "target")
     list_filter = ("action",)
     search_fields = ("target",)
+    actions = None  # no "delete selected"
+
+    def has_view_permission(self, request, obj=None):
+        return may(request.user, "read_audit")
+
+    def has_add_permission(self, request):
+        return False
 
     def has_change_permission(self, request, obj=None):
-        return False  # the audit trail is append-only
+        return False
+
+    def has_delete_permission(self, request, obj=None):
+        return False
 
 
 @admin.register(ExperimentRun)

@@ -142,11 +142,13 @@ def store_robot(url: str, graph: Graph, vocab: identify.Vocabulary) -> tuple[Rob
 def unique_name(name: str, url: str) -> str:
     """The robot's name, or `<name>-<host>-<port>` (then a counter) if another endpoint's robot has it."""
     from robots.discovery import endpoint_label
+    from robots.models import robot_name_from
 
-    candidate = name or endpoint_label(url)
+    label = robot_name_from(endpoint_label(url))
+    candidate = robot_name_from(name) if name else label  # names are data: one word, never grammar
     if not Robot.objects.filter(name=candidate).exists():
         return candidate
-    base = f"{candidate}-{endpoint_label(url)}"
+    base = f"{candidate}-{label}"
     candidate, n = base, 2
     while Robot.objects.filter(name=candidate).exists():
         candidate, n = f"{base}-{n}", n + 1

@@ -124,7 +124,7 @@ def test_same_urdf_name_on_two_endpoints_gets_distinct_robot_names(endpoint):
     first, second = endpoint(), endpoint()
     register_endpoints([first.url, second.url])
     names = sorted(Robot.objects.values_list("name", flat=True))
-    assert names == sorted(["fakebot", f"fakebot-127.0.0.1-{second.port}"])
+    assert names == sorted(["fakebot", f"fakebot-127-0-0-1-{second.port}"])
 
 
 def test_register_command_json_shape(endpoint):
