@@ -179,28 +179,29 @@ def audit_refusal(request, ability: str) -> None:
     audit.record(request.user, "access.refused", request.path[:255], ability=ability, method=request.method)
 
 
-def _session_auth_class():
+def _role_auth(ability: str):
+    """A django-ninja auth class for one ability, named ``may_<ability>`` so the OpenAPI document lists, per
+    operation, which ability it needs (and its security scheme says which roles have it)."""
     from ninja.security import SessionAuth
 
-    class RoleAuth(SessionAuth):
-        """django-ninja auth for one ability: 401 for anonymous callers, 403 for a role without it.
+    if ability not in ABILITIES:
+        raise KeyError(f"unknown ability {ability!r}; add it to fleet.roles.ABILITIES")
 
-        It runs before the body is parsed, so a refused caller learns nothing about valid payloads.
-        """
+    def authenticate(self, request, key):
+        """401 for anonymous callers (None), 403 for a role without the ability; before the body is read."""
+        if not request.user.is_authenticated:
+            return None
+        require(request, ability)
+        return request.user
 
-        def __init__(self, ability: str):
-            if ability not in ABILITIES:
-                raise KeyError(f"unknown ability {ability!r}; add it to fleet.roles.ABILITIES")
-            super().__init__()
-            self.ability = ability
-
-        def authenticate(self, request, key):
-            if not request.user.is_authenticated:
-                return None
-            require(request, self.ability)
-            return request.user
-
-    return RoleAuth
+    roles = ", ".join(ABILITIES[ability].roles())
+    attributes = {
+        "ability": ability,
+        "openapi_description": f"A logged-in session of: {roles} ({ABILITIES[ability].allows}).",
+        "authenticate": authenticate,
+        "__doc__": f"Session auth for the {ability!r} ability.",
+    }
+    return type(f"may_{ability}", (SessionAuth,), attributes)()
 
 
 _AUTHS: dict[str, object] = {}
@@ -209,7 +210,7 @@ _AUTHS: dict[str, object] = {}
 def api_auth(ability: str):
     """The django-ninja ``auth=`` of an operation that needs this ability (one instance per ability)."""
     if ability not in _AUTHS:
-        _AUTHS[ability] = _session_auth_class()(ability)
+        _AUTHS[ability] = _role_auth(ability)
     return _AUTHS[ability]
 
 
