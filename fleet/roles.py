@@ -129,6 +129,15 @@ def refusal(user, ability: str) -> str:
     return f"{who} may not {ABILITIES[ability].allows.split(',')[0]}: only {may_do} may ({ability})."
 
 
+def matrix_markdown() -> str:
+    """The matrix as the README's table (a test keeps the README equal to it)."""
+    lines = [f"| ability | what it allows | {' | '.join(ROLES)} |", "|---|---|" + ":-:|" * len(ROLES)]
+    for name, ability in ABILITIES.items():
+        cells = " | ".join("yes" if role in ability.roles() else "—" for role in ROLES)
+        lines.append(f"| `{name}` | {ability.allows} | {cells} |")
+    return "\n".join(lines)
+
+
 def context_processor(request):
     """Expose the user's role and abilities to every template (``may.teach``, ``can_control``, ...)."""
     user = request.user

@@ -41,6 +41,15 @@ def members(db):
     return users
 
 
+def test_the_readme_shows_the_matrix_as_it_is():
+    from pathlib import Path
+
+    from fleet.roles import matrix_markdown
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    assert matrix_markdown() in readme
+
+
 # --- URL patterns ---------------------------------------------------------------------------------------------
 
 
