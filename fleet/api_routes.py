@@ -8,7 +8,7 @@ from ninja.responses import Status
 from pydantic import Field, model_validator
 
 from fleet import audit
-from fleet.api_types import Id, LocalTime, Name, NonBlank, get_or_404, path_id
+from fleet.api_types import Id, LocalTime, Name, NonBlank, Text, get_or_404, path_id
 from fleet.models import Instruction, Location, TimeSlot
 from fleet.roles import api_auth
 from robots.models import Robot
@@ -41,7 +41,7 @@ class TimeSlotIn(Schema):
     start: LocalTime
     end: LocalTime
     goal: Name
-    task: Name = ""
+    task: Text = Field("", max_length=50)  # TimeSlot.task's length: PostgreSQL refuses longer, SQLite not
     enabled: bool = True
 
     @model_validator(mode="after")

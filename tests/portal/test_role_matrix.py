@@ -86,6 +86,19 @@ def test_every_url_pattern_declares_who_may_use_it():
     assert undeclared == []
 
 
+@pytest.mark.parametrize("role", CALLERS, ids=lambda role: role or "anonymous")
+def test_the_api_docs_and_schema_answer_each_role_as_the_matrix_says(client, members, role):
+    if role is not None:
+        client.force_login(members[role])
+    docs = [(r, p) for r, p in _patterns() if r.startswith("api/") and getattr(p.callback, "abilities", None)]
+    assert {p.name for _, p in docs} == {"openapi-json", "openapi-view"}
+    for route, pattern in docs:
+        response = client.get("/" + route)
+        ability = pattern.callback.abilities["GET"]
+        expected = 401 if role is None else 200 if allowed(role, ability) else 403
+        assert response.status_code == expected, route
+
+
 def test_the_api_root_answers_nothing_but_404(client):
     assert client.get("/api/").status_code == 404
 
