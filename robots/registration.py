@@ -20,7 +20,7 @@ from django.utils import timezone
 from audit import records as audit
 from robots import identify, kinematics
 from robots.discovery import Graph, discover
-from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic
+from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic, robot_name_from
 from robots.rosbridge import RosbridgeClient, RosbridgeError
 from robots.signals import robots_registered
 
@@ -148,7 +148,7 @@ def unique_name(name: str, model: str = "") -> str:
     Names are words of the instructions people type ("move turtlebot3_burger_2 to A"), so they hold letters,
     digits, `_` and `-` only.
     """
-    base = re.sub(r"[^0-9A-Za-z_-]+", "_", name or model or "robot").strip("_-") or "robot"
+    base = robot_name_from(re.sub(r"[^0-9A-Za-z_-]+", "_", name or model or "robot").strip("_-"))
     candidate, n = base, 2
     while Robot.objects.filter(name=candidate).exists():
         candidate, n = f"{base}_{n}", n + 1

@@ -14,8 +14,14 @@ export class Console {
 
   async submit(text, answerTo = null) {
     if (!text) return null;
+    return this.send(answerTo ? { text, answer_to: answerTo } : { text });
+  }
+
+  // body: { text } typed by a person, or { robot_ids, destination } from a click on the map or a location.
+  async send(body) {
+    const text = body.text;
     try {
-      const instruction = await request("/api/instructions", answerTo ? { text, answer_to: answerTo } : { text });
+      const instruction = await request("/api/instructions", body);
       this.showParse(instruction);
       this.track(instruction);
       if (this.input && this.input.value.trim() === text) this.input.value = "";

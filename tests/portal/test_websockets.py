@@ -132,7 +132,7 @@ async def test_viewer_stop_over_the_socket_is_refused(viewer, fleet):
     await communicator.send_json_to({"command": "stop", "robots": "all", "ref": 7})
     reply = await communicator.receive_json_from(timeout=5)
     assert reply["type"] == "command.result" and reply["ok"] is False and reply["ref"] == 7
-    assert "may only view" in reply["detail"]
+    assert "may not stop" in reply["detail"]
     await communicator.disconnect()
 
 
@@ -313,7 +313,7 @@ async def test_a_viewer_stop_publishes_nothing(viewer, fleet, recorded):
     await fast_stop.TARGETS._load()
     await communicator.send_json_to({"command": "stop", "robots": "all"})
     reply = await communicator.receive_json_from(timeout=5)
-    assert reply["ok"] is False and "may only view" in reply["detail"]
+    assert reply["ok"] is False and "may not stop" in reply["detail"]
     assert recorded == []
     await communicator.disconnect()
 
