@@ -11,7 +11,7 @@ from django.utils import timezone
 
 import live
 from access.models import ControlLease
-from access.roles import can_control, can_register
+from access.roles import can_control, can_take_over
 from audit import records as audit
 
 
@@ -60,7 +60,7 @@ def take(user, robot, seconds: int | None = None) -> ControlLease:
     seconds = seconds or settings.FLEET_CONTROL_LEASE_SECONDS
     lease = ControlLease.objects.select_for_update().filter(robot=robot).first()
     now = timezone.now()
-    if lease and lease.expires_at > now and lease.user != user and not can_register(user):
+    if lease and lease.expires_at > now and lease.user != user and not can_take_over(user):
         raise ControlRefused(
             f"{robot.name} is held by {lease.user.username} until {lease.expires_at:%H:%M:%S}."
         )
@@ -78,7 +78,7 @@ def release(user, robot) -> bool:
     lease = ControlLease.objects.filter(robot=robot).first()
     if lease is None:
         return False
-    if lease.user != user and not can_register(user):
+    if lease.user != user and not can_take_over(user):
         raise ControlRefused(f"{robot.name} is held by {lease.user.username}, not by you.")
     lease.delete()
     audit.record(user, "control.release", robot.name)

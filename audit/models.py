@@ -5,8 +5,25 @@ from django.db import models
 from django.utils import timezone
 
 
+class AppendOnlyError(Exception):
+    """The audit trail only grows: an entry is never changed or deleted, by the admin or by code."""
+
+
+class AuditQuerySet(models.QuerySet):
+    """Audit rows are read and added; a bulk change or delete is refused (below the admin, for every caller)."""
+
+    def _refuse(self, *args, **kwargs):
+        raise AppendOnlyError("The audit trail is append-only: entries are never changed or deleted.")
+
+    update = delete = bulk_update = update_or_create = _refuse
+
+
 class AuditEntry(models.Model):
-    """Who did what, when: every command, registration and ontology or schedule edit."""
+    """Who did what, when: every command, registration and ontology or schedule edit. Append-only.
+
+    Deleting a user keeps their entries (the user becomes empty, the rest stays): Django's cascade updates them
+    through its base manager, which is the one change allowed.
+    """
 
     at = models.DateTimeField(default=timezone.now)
     user = models.ForeignKey(settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL)
@@ -16,6 +33,8 @@ class AuditEntry(models.Model):
     target = models.CharField(max_length=255, blank=True)
     details = models.JSONField(default=dict, blank=True)
 
+    objects = AuditQuerySet.as_manager()
+
     class Meta:
         ordering = ["-at"]
         verbose_name_plural = "audit entries"
@@ -23,3 +42,13 @@ class AuditEntry(models.Model):
 
     def __str__(self):
         return f"{self.at:%Y-%m-%d %H:%M:%S} {self.user} {self.action} {self.target}"
+
+    def save(self, *args, **kwargs):
+        """Insert once; saving an entry that is already stored is refused."""
+        if not self._state.adding:
+            raise AppendOnlyError("The audit trail is append-only: entries are never changed.")
+        kwargs["force_insert"] = True
+        super().save(*args, **kwargs)
+
+    def delete(self, *args, **kwargs):
+        raise AppendOnlyError("The audit trail is append-only: entries are never deleted.")

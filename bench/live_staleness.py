@@ -28,7 +28,7 @@ async def client(url: str, cookie: str, origin: str, samples: list[float], stop:
             now = time.time()
             frames += 1
             msg = json.loads(raw)
-            if msg.get("type") == "robots.poses":
+            if msg.get("type") == "fleet.poses":
                 samples.extend((now - p["t"]) * 1000 for p in msg.get("poses", []) if p.get("t"))
     return frames
 

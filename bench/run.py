@@ -277,7 +277,7 @@ class Bench:
         stats = got["staleness_ms"]
         if not stats["n"]:
             raise Unavailable(
-                f"no pose reached the browsers ({got['errors'][:2] or 'no robots.poses messages'})"
+                f"no pose reached the browsers ({got['errors'][:2] or 'no fleet.poses messages'})"
             )
         return result(
             "Live staleness: simulator odometry -> browser WebSocket",

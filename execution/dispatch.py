@@ -47,11 +47,7 @@ def local_time(moment=None):
 def active_slot(robot: Robot, moment=None) -> TimeSlot | None:
     """The robot's enabled time slot covering this moment, if any."""
     now = local_time(moment)
-    return (
-        TimeSlot.objects.filter(robot=robot, enabled=True, start__lte=now, end__gt=now)
-        .select_related("goal")
-        .first()
-    )
+    return TimeSlot.objects.running_at(now).filter(robot=robot).select_related("goal").first()
 
 
 def describe_slot(slot: TimeSlot) -> str:

@@ -43,7 +43,7 @@ def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to) -
     instruction = Instruction.objects.create(text=text, user=user, source=source, answer_to=answer_to)
     audit.record(user, "instruct", text[:255], instruction=instruction.pk, source=source)
     if answer_to is not None:
-        close_dialog(answer_to, "answered")
+        close_dialog(answer_to, "answered", answered_by=instruction)
     instruction.parse = result
     instruction.type = result.get("type", "")
     instruction.interpreted_at = timezone.now()
@@ -87,13 +87,25 @@ def _ask(instruction: Instruction, result: dict) -> Instruction:
     return _close(instruction, Instruction.Status.NEEDS_USER, question)
 
 
-def close_dialog(instruction: Instruction, reason: str) -> None:
-    """Bring the robots waiting on this instruction's question back to ready."""
+def close_dialog(instruction: Instruction, reason: str, answered_by: Instruction | None = None) -> None:
+    """Bring the robots waiting on this instruction's question back to ready; close the question.
+
+    Answered (answered_by: the instruction the answer ran as), the question keeps its type (V for a word the
+    interpreter did not know) and says which instruction ran; else it is cancelled with the reason.
+    """
     for robot in Robot.objects.filter(
         transitions__instruction=instruction, state=Robot.State.DIALOG
     ).distinct():
         Robot.objects.transition(robot.pk, Event.DONE, reason, instruction)
-    if instruction.status == Instruction.Status.NEEDS_USER:
+    if instruction.status != Instruction.Status.NEEDS_USER:
+        return
+    if answered_by is not None:
+        _close(
+            instruction,
+            Instruction.Status.ANSWERED,
+            f"{instruction.outcome} Answered: ran as #{answered_by.pk}.",
+        )
+    else:
         _close(instruction, Instruction.Status.CANCELLED, f"{instruction.outcome} ({reason})")
 
 

@@ -10,6 +10,12 @@ from places.models import Location
 from robots.models import Robot
 
 
+class TimeSlotQuerySet(models.QuerySet):
+    def running_at(self, local_time):
+        """Enabled slots running at this local wall-clock time (schedules are in local time)."""
+        return self.filter(enabled=True, start__lte=local_time, end__gt=local_time)
+
+
 class TimeSlot(models.Model):
     """A daily slot in which a robot goes to a goal and does a task (the paper's Tables 2 and 12)."""
 
@@ -20,6 +26,8 @@ class TimeSlot(models.Model):
     task = models.CharField(max_length=50, blank=True, help_text="e.g. rotate(5) or clean")
     enabled = models.BooleanField(default=True)
     last_run_on = models.DateField(null=True, blank=True)
+
+    objects = TimeSlotQuerySet.as_manager()
 
     class Meta:
         ordering = ["robot", "start"]
@@ -33,10 +41,6 @@ class TimeSlot(models.Model):
 
     def __str__(self):
         return f"{self.robot} {self.start:%H:%M}-{self.end:%H:%M} {self.goal} {self.task}".strip()
-
-    def covers(self, moment) -> bool:
-        """Whether the slot is running at this local time."""
-        return self.enabled and self.start <= moment < self.end
 
 
 class InstructionQuerySet(models.QuerySet):
@@ -74,8 +78,9 @@ class Instruction(models.Model):
         SUCCEEDED = "succeeded"
         FAILED = "failed"
         CANCELLED = "cancelled"
+        ANSWERED = "answered"  # a question the person answered: the answer ran as a new instruction
 
-    FINAL = (Status.REFUSED, Status.SUCCEEDED, Status.FAILED, Status.CANCELLED)
+    FINAL = (Status.REFUSED, Status.SUCCEEDED, Status.FAILED, Status.CANCELLED, Status.ANSWERED)
 
     text = models.TextField()
     user = models.ForeignKey(settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL)
@@ -183,6 +188,7 @@ class Execution(models.Model):
     first_command_at = models.DateTimeField(null=True, blank=True)
     motion_started_at = models.DateTimeField(null=True, blank=True)
     finished_at = models.DateTimeField(null=True, blank=True)
+    outcome = models.TextField(blank=True, help_text="what the robot did, in words (its handlers' answers)")
     error = models.TextField(blank=True)
 
     objects = ExecutionQuerySet.as_manager()

@@ -162,7 +162,8 @@ def _halt(link: RobotLink | None) -> None:
 
 def finish(execution: Execution, token: str, outcome: str, words: str) -> bool:
     """Record the outcome (only if this token still runs it), move the robot to ready, settle the instruction."""
-    fields = {"status": outcome, "error": "" if outcome in ("succeeded", "preempted") else words[:2000]}
+    ok = outcome in ("succeeded", "preempted")
+    fields = {"status": outcome, "outcome": words[:2000], "error": "" if ok else words[:2000]}
     if outcome in FINAL:
         fields["finished_at"] = timezone.now()
     won = Execution.objects.filter(pk=execution.pk, status=Execution.Status.RUNNING, worker=token).update(
@@ -188,13 +189,16 @@ def settle(instruction_id: int, note: str = "") -> None:
         status = Instruction.Status.CANCELLED
     else:
         status = Instruction.Status.SUCCEEDED
-    outcome = "; ".join(
-        f"{row.robot.name}: {row.status}{' (' + row.error + ')' if row.error else ''}" for row in rows
-    )
+    outcome = "; ".join(f"{row.robot.name}: {row.status}{_detail(row)}" for row in rows)
     Instruction.objects.filter(pk=instruction_id).exclude(status__in=Instruction.FINAL).update(
         status=status, finished_at=timezone.now(), outcome=outcome[:4000]
     )
     _push_instruction(instruction_id)
+
+
+def _detail(row: Execution) -> str:
+    words = row.error or row.outcome
+    return f" ({words})" if words else ""
 
 
 def _push_instruction(instruction_id: int) -> None:

@@ -28,6 +28,41 @@ def env_bool(name: str, default: bool = False) -> bool:
     raise ImproperlyConfigured(f"{name}: expected one of 1/0, true/false, yes/no, on/off, got {raw!r}")
 
 
+def env_int(name: str, default: int, minimum: int = 0, maximum: int = 10**9) -> int:
+    """Read a whole number within [minimum, maximum]; anything else is an error."""
+    raw = os.environ.get(name)
+    if raw is None or raw.strip() == "":
+        return default
+    try:
+        value = int(raw.strip())
+    except ValueError:
+        raise ImproperlyConfigured(f"{name}: expected a whole number, got {raw!r}") from None
+    if not minimum <= value <= maximum:
+        raise ImproperlyConfigured(f"{name}: expected a number from {minimum} to {maximum}, got {value}")
+    return value
+
+
+def tls_settings(behind_tls: bool, hosts: list[str]) -> dict:
+    """The settings FLEET_BEHIND_TLS turns on (all off on a laptop's plain http://127.0.0.1:8000).
+
+    Behind a TLS-terminating proxy that sets X-Forwarded-Proto: https everywhere (redirect), for a year (HSTS),
+    cookies only over https, and the proxy's word taken for the scheme. `manage.py check --deploy` is clean.
+    """
+    origins = [host for host in hosts if host not in {"*", "testserver"}]
+    if not behind_tls:
+        return {"CSRF_TRUSTED_ORIGINS": [f"http://{host}:8000" for host in origins]}
+    return {
+        "SECURE_SSL_REDIRECT": True,
+        "SECURE_PROXY_SSL_HEADER": ("HTTP_X_FORWARDED_PROTO", "https"),
+        "SECURE_HSTS_SECONDS": 365 * 24 * 3600,
+        "SECURE_HSTS_INCLUDE_SUBDOMAINS": True,
+        "SECURE_HSTS_PRELOAD": True,
+        "SESSION_COOKIE_SECURE": True,
+        "CSRF_COOKIE_SECURE": True,
+        "CSRF_TRUSTED_ORIGINS": [f"https://{host}" for host in origins],
+    }
+
+
 def env_list(name: str, default: list[str]) -> list[str]:
     """Read a comma-separated list; empty items are an error."""
     raw = os.environ.get(name)

@@ -12,10 +12,12 @@ from fleet.env import (
     channels_host,
     env_bool,
     env_database,
+    env_int,
     env_list,
     env_redis_url,
     env_secret_key,
     env_str,
+    tls_settings,
 )
 
 BASE_DIR = Path(__file__).resolve().parent.parent
@@ -25,7 +27,6 @@ VAR_DIR.mkdir(parents=True, exist_ok=True)
 SECRET_KEY = env_secret_key("SECRET_KEY", VAR_DIR / "secret_key")
 DEBUG = env_bool("FLEET_DEBUG", default=False)
 ALLOWED_HOSTS = env_list("ALLOWED_HOSTS", ["127.0.0.1", "localhost", "[::1]", "testserver"])
-CSRF_TRUSTED_ORIGINS = [f"http://{host}:8000" for host in ALLOWED_HOSTS if host not in {"*", "testserver"}]
 
 REDIS_URL = env_redis_url("REDIS_URL", VAR_DIR / "redis.sock")
 EMBEDDED_REDIS = "REDIS_URL" not in os.environ or not os.environ["REDIS_URL"]
@@ -39,6 +40,7 @@ INSTALLED_APPS = [
     "django.contrib.staticfiles",
     "channels",
     # Project and domain apps, from the top layer down (docs/ARCHITECTURE.md; `make lint` checks the order).
+    "axes",
     "fleet",
     "portal",
     "experiments",
@@ -62,6 +64,7 @@ MIDDLEWARE = [
     "portal.middleware.LoginRequired",
     "django.contrib.messages.middleware.MessageMiddleware",
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
+    "axes.middleware.AxesMiddleware",  # last, as django-axes asks: turns a lockout into its 429 answer
 ]
 
 ROOT_URLCONF = "fleet.urls"
@@ -126,6 +129,27 @@ CELERY_BROKER_CONNECTION_RETRY_ON_STARTUP = True
 AUTH_PASSWORD_VALIDATORS = [
     {"NAME": "django.contrib.auth.password_validation.MinimumLengthValidator", "OPTIONS": {"min_length": 8}},
 ]
+# --- security (issue 15; README "Security") ------------------------------------------------------------------
+# One switch for deployments behind a TLS-terminating proxy: HSTS, secure cookies, SSL redirect, proxy header.
+FLEET_BEHIND_TLS = env_bool("FLEET_BEHIND_TLS", default=False)
+globals().update(
+    tls_settings(FLEET_BEHIND_TLS, ALLOWED_HOSTS)
+)  # CSRF_TRUSTED_ORIGINS, SECURE_*, *_COOKIE_SECURE
+# Sessions end after a working day, however active (FLEET_SESSION_HOURS); the cookie is never readable by JS.
+SESSION_COOKIE_AGE = env_int("FLEET_SESSION_HOURS", 12, minimum=1, maximum=24 * 30) * 3600
+SESSION_COOKIE_HTTPONLY = True
+SESSION_COOKIE_SAMESITE = CSRF_COOKIE_SAMESITE = "Lax"
+# Login throttling (django-axes): after 5 wrong passwords for one username from one address, that pair is
+# refused (429) for 15 minutes; a success resets the count. Per pair, so nobody can lock the admin out from
+# elsewhere. Works for the login page and the admin's alike (both go through the authentication backends).
+AUTHENTICATION_BACKENDS = ["axes.backends.AxesStandaloneBackend", "django.contrib.auth.backends.ModelBackend"]
+AXES_FAILURE_LIMIT = env_int("FLEET_LOGIN_ATTEMPTS", 5, minimum=1, maximum=100)
+AXES_COOLOFF_TIME = 0.25  # hours
+AXES_LOCKOUT_PARAMETERS = [["username", "ip_address"]]
+AXES_RESET_ON_SUCCESS = True
+AXES_VERBOSE = False
+# --- end of security ---------------------------------------------------------------------------------------
+
 LOGIN_URL = "login"
 LOGIN_REDIRECT_URL = "dashboard"
 LOGOUT_REDIRECT_URL = "login"

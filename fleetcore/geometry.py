@@ -52,15 +52,16 @@ def inverse(a: Pose2D) -> Pose2D:
 
 
 def pose_of(msg: dict) -> Pose2D:
-    """(x, y, yaw) of an Odometry or PoseWithCovarianceStamped (both carry pose.pose), a PoseStamped or a Pose."""
-    pose = msg.get("pose", msg)
-    pose = pose.get("pose", pose) if isinstance(pose, dict) else {}
-    position = pose.get("position") or {}
-    return (
-        float(position.get("x", 0.0) or 0.0),
-        float(position.get("y", 0.0) or 0.0),
-        yaw_of(pose.get("orientation") or {}),
-    )
+    """(x, y, yaw) of an Odometry or PoseWithCovarianceStamped (both carry pose.pose), a PoseStamped or a Pose.
+
+    A message without a position is not a pose: KeyError (a robot is never put at the origin by a bad message).
+    """
+    pose = msg.get("pose", msg) if isinstance(msg, dict) else None
+    pose = pose.get("pose", pose) if isinstance(pose, dict) else None
+    position = pose.get("position") if isinstance(pose, dict) else None
+    if not isinstance(position, dict) or "x" not in position or "y" not in position:
+        raise KeyError("no pose.position.x/y in the message")
+    return float(position["x"]), float(position["y"]), yaw_of(pose.get("orientation") or {})
 
 
 def twist_of(msg: dict) -> tuple[float, float]:

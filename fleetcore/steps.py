@@ -18,7 +18,7 @@ from fleetcore import actions
 SPEEDS: dict[str, float] = {"very slow": 0.2, "slow": 0.35, "normal": 0.6, "fast": 0.85, "very fast": 1.0}
 DEFAULT_SPEED = "normal"
 ALL, ANY = "all", "any"  # every free robot; the one best robot (allocation)
-TASK_RE = re.compile(r"^(?P<name>[a-z_]+)(?:\((?P<count>\d{1,3})\))?$")
+TASK_RE = re.compile(r"^(?P<name>[a-z_]+)(?:\((?P<count>\d{1,3}(?:\.\d{1,3})?)\))?$")
 MAX_COUNT = 100
 
 
@@ -34,8 +34,8 @@ def speed_factor(word: str | None) -> float:
     return SPEEDS[key]
 
 
-def parse_task(task: str) -> tuple[str, int]:
-    """("rotate", 3) from "rotate(3)"; ("clean", 1) from "clean"; StepError for anything else."""
+def parse_task(task: str) -> tuple[str, float]:
+    """("rotate", 3) from "rotate(3)" (a quarter turn: "rotate(0.25)"); ("clean", 1) from "clean"; else StepError."""
     match = TASK_RE.match(re.sub(r"\s+", "", str(task or "")).lower())
     spec = actions.ACTIONS.get(match["name"]) if match else None
     if spec is None or spec.category != "task" or (match["count"] and not spec.countable):
@@ -45,10 +45,10 @@ def parse_task(task: str) -> tuple[str, int]:
             if a.category == "task"
         ]
         raise StepError(f"unknown task {task!r}; known: {', '.join(tasks)}")
-    count = int(match["count"] or 1)
-    if not 1 <= count <= MAX_COUNT:
-        raise StepError(f"a task is repeated 1 to {MAX_COUNT} times, not {count}")
-    return match["name"], count
+    count = float(match["count"] or 1)
+    if not 0 < count <= MAX_COUNT:
+        raise StepError(f"a task is repeated more than 0 and up to {MAX_COUNT} times, not {count:g}")
+    return match["name"], int(count) if count.is_integer() else count
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,9 @@ def _robots(value) -> tuple[str, ...] | str:
         return ANY
     if value == ALL:
         return ALL
-    if isinstance(value, list | tuple) and value and all(isinstance(v, str) and v for v in value):
+    if isinstance(value, list | tuple) and not value:
+        raise StepError("Say which robot should do it (a name, 'all robots' or 'any robot').")
+    if isinstance(value, list | tuple) and all(isinstance(v, str) and v for v in value):
         return tuple(value)
     raise StepError("robots is a list of robot names, 'all' or 'any'")
 

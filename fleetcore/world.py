@@ -37,6 +37,12 @@ class RobotSpec:
     y: float
     yaw: float = 0.0
     stack: str = ""  # "", "move_base" (ROS 1) or "nav2" (ROS 2)
+    dock: tuple[float, float, float] | None = None  # (x, y, yaw) of its dock station; None: it has none
+
+    @property
+    def home(self) -> tuple[float, float, float]:
+        """Where the robot belongs: its dock if it has one, else its start pose."""
+        return self.dock if self.dock is not None else (self.x, self.y, self.yaw)
 
 
 @dataclass(frozen=True)
@@ -104,7 +110,7 @@ def _free_spots(world: World, spacing: float) -> list[tuple[float, float]]:
     w, h = grid.size_m
     ox, oy, _ = grid.origin
     margin = spacing / 2
-    taken = [(r.x, r.y) for r in world.robots]
+    taken = [(r.x, r.y) for r in world.robots] + [r.dock[:2] for r in world.robots if r.dock]
     spots = []
     y = oy + spacing
     while y < oy + h - spacing:
@@ -172,7 +178,24 @@ def _num(entry: dict, *keys: str) -> dict:
 def _robot(entry: dict) -> RobotSpec:
     out = _num(entry, "x", "y", "yaw")
     out.setdefault("namespace", "")
+    if "dock" in out:
+        out["dock"] = _dock(out, out["dock"])
     return RobotSpec(**out)
+
+
+def _dock(robot: dict, dock) -> tuple[float, float, float]:
+    """Return a robot's `dock: {x, y, yaw}` as a pose; a key left out takes the robot's start value."""
+    name = robot.get("name", "?")
+    if not isinstance(dock, dict):
+        raise ValueError(f"robot {name!r}: dock must be a mapping {{x, y, yaw}}, not {dock!r}")
+    unknown = set(dock) - {"x", "y", "yaw"}
+    if unknown:
+        raise ValueError(f"robot {name!r}: dock has unknown keys {sorted(unknown)} (allowed: x, y, yaw)")
+    start = {"x": robot.get("x"), "y": robot.get("y"), "yaw": robot.get("yaw", 0.0)}
+    try:
+        return tuple(float(dock.get(k, start[k])) for k in ("x", "y", "yaw"))
+    except (TypeError, ValueError):
+        raise ValueError(f"robot {name!r}: dock x, y and yaw must be numbers, got {dock!r}") from None
 
 
 def _check(world: World, path: Path) -> None:
@@ -185,6 +208,13 @@ def _check(world: World, path: Path) -> None:
             raise WorldFormatError(f"{path}: robot {r.name!r} uses unknown endpoint {r.endpoint!r}")
         if not world.map.is_free(r.x, r.y):
             raise WorldFormatError(f"{path}: robot {r.name!r} starts on a cell that is not free")
+        if r.dock is not None and not world.map.is_free(*r.dock[:2]):
+            raise WorldFormatError(f"{path}: robot {r.name!r} has its dock on a cell that is not free")
+        if r.dock is not None and r.stack != "nav2":
+            raise WorldFormatError(
+                f"{path}: robot {r.name!r} has a dock but stack {r.stack!r}: the docking action"
+                " (irobot_create_msgs/action/Dock) needs a ROS 2 robot with stack nav2"
+            )
     for s in world.schedules:
         if s.robot not in names or s.goal not in places:
             raise WorldFormatError(f"{path}: schedule names unknown robot {s.robot!r} or goal {s.goal!r}")

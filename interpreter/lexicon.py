@@ -15,7 +15,9 @@ from rapidfuzz.distance import OSA
 
 from interpreter.terms import Terms, class_ancestry
 
-WORD_RE = re.compile(r"[^\W_]+(?:['’_][^\W_]+)*|\d+(?:\.\d+)?")
+WORD_RE = re.compile(
+    r"[^\W_]+(?:['’_-][^\W_]+)*|\d+(?:\.\d+)?"
+)  # a name may hold _ and - (turtlebot3_burger_2, robot-7)
 
 # The phrases of each speed word of the step contract (fleetcore.steps.SPEEDS): one key each, no more.
 _SPEED_PHRASES = {

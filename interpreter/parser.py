@@ -23,7 +23,7 @@ _TOKEN_RE = re.compile(
     rf"""(?P<coord>[(\[]\s*(?P<cx>{_NUM})\s*[,;]?\s*(?P<cy>{_NUM})\s*[)\]])
     |(?P<xy>(?<![^\W\d_])x\s*[:=]?\s*(?P<xx>{_NUM})\s*,?\s*(?:and\s+)?y\s*[:=]?\s*(?P<yy>{_NUM}))
     |(?P<num>{_NUM})(?!\w)
-    |(?P<word>[^\W_]+(?:['’_][^\W_]+)*)
+    |(?P<word>[^\W_]+(?:['’_-][^\W_]+)*)
     |(?P<stop>[;.!?]+)
     |(?P<comma>,)""",
     re.X | re.I,

@@ -114,7 +114,7 @@ def alert(alert: dict, open_count: int) -> None:
 
 
 # Poses travel on their own group: high-rate telemetry, one batched message per tick for the whole fleet.
-POSES_GROUP = "robots.poses"
+POSES_GROUP = "fleet.poses"
 POSE_CACHE_KEY = "fleet:pose:{id}"
 
 
@@ -129,7 +129,7 @@ class RobotPose(TypedDict):
 
 
 class PoseBatch(TypedDict):
-    type: str  # "robots.poses"
+    type: str  # "fleet.poses"
     poses: list[RobotPose]
 
 
@@ -197,4 +197,4 @@ def registration(endpoint: str, stage: str, message: str = "", robots=(), ok: bo
 
 def poses(batch: list[RobotPose]) -> PoseBatch:
     """The message for one tick of poses (sent by robots.poses, which owns the rate)."""
-    return PoseBatch(type="robots.poses", poses=batch)
+    return PoseBatch(type="fleet.poses", poses=batch)

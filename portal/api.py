@@ -1,35 +1,53 @@
 """The JSON API under /api/ (django-ninja): typed schemas give the OpenAPI document at /api/openapi.json.
 
-Every route needs a logged-in session (401 otherwise); permissions are checked per route (403).
+Every operation names the ability it needs (access.roles.ABILITIES): anonymous callers get 401, a role without
+the ability 403, both before the body is read. Reads need "view" (the default below). Bad input gets a 4xx
+whose detail names the field; nothing a caller sends may end in a 500.
 """
 
 from functools import wraps
 
 from django.http import JsonResponse
 from ninja import NinjaAPI
-from ninja.security import django_auth
+from ninja.errors import HttpError
+
+from access.roles import api_auth, may, refusal
+
+UNPARSEABLE = "Cannot parse request body"
 
 
-def login_required_401(view):
-    """Like login_required, but an API answers 401 instead of redirecting to a form."""
+def view_required(view):
+    """The docs and the schema: 401 for anonymous callers, 403 without the "view" ability (no redirect)."""
 
     @wraps(view)
     def wrapper(request, *args, **kwargs):
         if not request.user.is_authenticated:
             return JsonResponse({"detail": "Unauthorized"}, status=401)
+        if not may(request.user, "view"):
+            return JsonResponse({"detail": refusal(request.user, "view")}, status=403)
         return view(request, *args, **kwargs)
 
+    wrapper.abilities = {"GET": "view", "HEAD": "view"}
     return wrapper
 
 
 api = NinjaAPI(
     title="Fleet portal API",
     version="1",
-    auth=django_auth,
+    auth=api_auth("view"),
     urls_namespace="api",
     docs_url="/docs",
-    docs_decorator=login_required_401,
+    docs_decorator=view_required,
 )
+
+
+@api.exception_handler(HttpError)
+def http_error(request, exc: HttpError):
+    """ninja's own 400 for a body that is not JSON names no field: say it is the body."""
+    detail = str(exc)
+    if exc.status_code == 400 and detail.startswith(UNPARSEABLE):
+        detail = "body: not a JSON document this operation accepts"
+    return api.create_response(request, {"detail": detail}, status=exc.status_code)
 
 
 def _mount_routers():

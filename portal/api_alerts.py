@@ -5,9 +5,10 @@ from datetime import datetime
 from ninja import Router, Schema
 from ninja.errors import HttpError
 
-from access.roles import ALERT_HANDLE_PERM, ALERT_VIEW_PERM, require_perm
+from access.roles import api_auth
 from alerts import service
 from alerts.models import Alert
+from portal.api_types import Id, Text
 
 router = Router(tags=["alerts"])
 
@@ -39,13 +40,12 @@ class AlertOut(Schema):
 
 
 class ResolveIn(Schema):
-    note: str = ""
+    note: Text = ""
 
 
-@router.get("", response=list[AlertOut])
+@router.get("", response=list[AlertOut], auth=api_auth("view_alerts"))
 def list_alerts(request, status: str = "open", limit: int = 100):
     """Alerts, newest first: open (default), unacknowledged, resolved or all."""
-    require_perm(request, ALERT_VIEW_PERM)
     if status not in LISTS:
         raise HttpError(422, f"status: expected one of {', '.join(LISTS)}, got {status!r}")
     rows = LISTS[status]().select_related("robot", "acknowledged_by", "resolved_by")[
@@ -54,17 +54,15 @@ def list_alerts(request, status: str = "open", limit: int = 100):
     return [service.as_dict(alert) for alert in rows]
 
 
-@router.post("/{alert_id}/acknowledge", response=AlertOut)
-def acknowledge(request, alert_id: int):
+@router.post("/{alert_id}/acknowledge", response=AlertOut, auth=api_auth("handle_alerts"))
+def acknowledge(request, alert_id: Id):
     """Take the alert on (it stays open until resolved)."""
-    require_perm(request, ALERT_HANDLE_PERM)
     return service.as_dict(_apply(service.acknowledge, alert_id, request.user))
 
 
-@router.post("/{alert_id}/resolve", response=AlertOut)
-def resolve(request, alert_id: int, payload: ResolveIn | None = None):
+@router.post("/{alert_id}/resolve", response=AlertOut, auth=api_auth("handle_alerts"))
+def resolve(request, alert_id: Id, payload: ResolveIn | None = None):
     """Close the alert, with a note on what was done."""
-    require_perm(request, ALERT_HANDLE_PERM)
     return service.as_dict(_apply(service.resolve, alert_id, request.user, payload.note if payload else ""))
 
 

@@ -2,10 +2,11 @@
 
 from datetime import datetime
 
-from django.shortcuts import get_object_or_404
 from ninja import Router, Schema, Status
+from pydantic import Field
 
-from access.roles import REGISTER_PERM, require_perm
+from access.roles import api_auth
+from portal.api_types import Name, get_or_404
 from robots.models import Binding, Robot
 
 router = Router(tags=["robots"])
@@ -45,11 +46,11 @@ class RobotDetailOut(RobotOut):
 
 
 class BindingChoiceIn(Schema):
-    target: str
+    target: Name
 
 
 class RegisterIn(Schema):
-    endpoints: list[str]
+    endpoints: list[Name] = Field(max_length=1000)
     wait: bool = False
 
 
@@ -71,10 +72,9 @@ def list_robots(request):
     return Robot.objects.all()
 
 
-@router.post("/register", response={200: RegisterOut, 202: RegisterOut})
+@router.post("/register", response={200: RegisterOut, 202: RegisterOut}, auth=api_auth("register"))
 def register_robots(request, payload: RegisterIn):
     """Register rosbridge endpoints: queued as a Celery task, or inline with wait=true."""
-    require_perm(request, REGISTER_PERM)
     from ninja.errors import HttpError
 
     from robots.tasks import register_endpoints
@@ -88,8 +88,8 @@ def register_robots(request, payload: RegisterIn):
 
 
 @router.get("/{name}", response=RobotDetailOut)
-def robot_detail(request, name: str):
-    robot = get_object_or_404(Robot, name=name)
+def robot_detail(request, name: Name):
+    robot = get_or_404(Robot, "name", name=name)
     return {
         **RobotOut.from_orm(robot).dict(),
         "footprint": robot.footprint,
@@ -98,11 +98,10 @@ def robot_detail(request, name: str):
     }
 
 
-@router.put("/{name}/bindings/{action}", response=BindingOut)
-def choose_binding(request, name: str, action: Binding.Action, payload: BindingChoiceIn):
+@router.put("/{name}/bindings/{action}", response=BindingOut, auth=api_auth("edit_bindings"))
+def choose_binding(request, name: Name, action: Binding.Action, payload: BindingChoiceIn):
     """A person resolves a binding the engine was unsure of; the choice survives re-registration."""
-    require_perm(request, REGISTER_PERM)
-    robot = get_object_or_404(Robot, name=name)
+    robot = get_or_404(Robot, "name", name=name)
     from robots.binding import choose
 
     return choose(robot, action, payload.target, request.user)

@@ -2,16 +2,16 @@
 
 from datetime import datetime, time
 
-from django.shortcuts import get_object_or_404
-from ninja import Router, Schema
+from ninja import Query, Router, Schema
 from ninja.errors import HttpError
 from ninja.responses import Status
 from pydantic import Field, model_validator
 
-from access.roles import CONTROL_PERM, SCHEDULE_PERM, require_perm
+from access.roles import api_auth
 from audit import records as audit
 from execution.models import Instruction, TimeSlot
 from places.models import Location
+from portal.api_types import Id, LocalTime, Name, NonBlank, Text, get_or_404, path_id
 from robots.models import Robot
 
 router = Router()
@@ -38,11 +38,11 @@ class TimeSlotOut(Schema):
 
 
 class TimeSlotIn(Schema):
-    robot: str
-    start: time
-    end: time
-    goal: str
-    task: str = ""
+    robot: Name
+    start: LocalTime
+    end: LocalTime
+    goal: Name
+    task: Text = Field("", max_length=50)  # TimeSlot.task's length: PostgreSQL refuses longer, SQLite not
     enabled: bool = True
 
     @model_validator(mode="after")
@@ -52,8 +52,37 @@ class TimeSlotIn(Schema):
         return self
 
 
+class Destination(Schema):
+    """Where click-to-move sends robots: a location by id, or a point on the map."""
+
+    location: Id | None = None
+    x: float | None = Field(None, allow_inf_nan=False, ge=-1e6, le=1e6)
+    y: float | None = Field(None, allow_inf_nan=False, ge=-1e6, le=1e6)
+
+    @model_validator(mode="after")
+    def one_place(self):
+        has_point = self.x is not None and self.y is not None
+        half_point = (self.x is None) != (self.y is None)
+        if half_point or has_point == (self.location is not None):
+            raise ValueError("destination: give a location id, or both x and y")
+        return self
+
+
 class InstructionIn(Schema):
-    text: str = Field(min_length=1, max_length=2000)
+    """Words for the interpreter, or (click-to-move) robot ids and a destination, which never become words."""
+
+    text: NonBlank | None = Field(None, max_length=2000)
+    robot_ids: list[Id] | None = Field(None, min_length=1, max_length=1000)
+    destination: Destination | None = None
+    answer_to: Id | None = Field(None, description="the instruction whose question this answers (it closes)")
+
+    @model_validator(mode="after")
+    def words_or_ids(self):
+        if (self.text is None) == (self.robot_ids is None):
+            raise ValueError("text: give either text, or robot_ids with a destination")
+        if self.robot_ids is not None and self.destination is None:
+            raise ValueError("destination: robot_ids need a destination")
+        return self
 
 
 class InstructionOut(Schema):
@@ -79,7 +108,7 @@ def list_locations(request):
 
 
 @router.get("/schedules", response=list[TimeSlotOut], tags=["schedules"])
-def list_schedules(request, robot: str | None = None):
+def list_schedules(request, robot: Name | None = None):
     slots = TimeSlot.objects.select_related("robot", "goal")
     return slots.filter(robot__name=robot) if robot else slots
 
@@ -94,18 +123,19 @@ def _slot_fields(payload: TimeSlotIn) -> dict:
     return {"robot": robot, "goal": goal, **payload.dict(include={"start", "end", "task", "enabled"})}
 
 
-@router.post("/schedules", response={201: TimeSlotOut}, tags=["schedules"])
+EDIT_SCHEDULES = api_auth("edit_schedules")
+
+
+@router.post("/schedules", response={201: TimeSlotOut}, tags=["schedules"], auth=EDIT_SCHEDULES)
 def create_slot(request, payload: TimeSlotIn):
-    require_perm(request, SCHEDULE_PERM)
     slot = TimeSlot.objects.create(**_slot_fields(payload))
     audit.record(request.user, "schedule.create", str(slot))
     return Status(201, slot)
 
 
-@router.put("/schedules/{slot_id}", response=TimeSlotOut, tags=["schedules"])
-def update_slot(request, slot_id: int, payload: TimeSlotIn):
-    require_perm(request, SCHEDULE_PERM)
-    slot = get_object_or_404(TimeSlot, pk=slot_id)
+@router.put("/schedules/{slot_id}", response=TimeSlotOut, tags=["schedules"], auth=EDIT_SCHEDULES)
+def update_slot(request, payload: TimeSlotIn, slot_id: int = path_id()):
+    slot = get_or_404(TimeSlot, "slot_id", pk=slot_id)
     for field, value in _slot_fields(payload).items():
         setattr(slot, field, value)
     slot.save()
@@ -113,31 +143,64 @@ def update_slot(request, slot_id: int, payload: TimeSlotIn):
     return slot
 
 
-@router.delete("/schedules/{slot_id}", response={204: None}, tags=["schedules"])
-def delete_slot(request, slot_id: int):
-    require_perm(request, SCHEDULE_PERM)
-    slot = get_object_or_404(TimeSlot, pk=slot_id)
+@router.delete("/schedules/{slot_id}", response={204: None}, tags=["schedules"], auth=EDIT_SCHEDULES)
+def delete_slot(request, slot_id: int = path_id()):
+    slot = get_or_404(TimeSlot, "slot_id", pk=slot_id)
     audit.record(request.user, "schedule.delete", str(slot))
     slot.delete()
     return Status(204, None)
 
 
 @router.get("/instructions", response=list[InstructionOut], tags=["instructions"])
-def list_instructions(request, status: str | None = None, limit: int = 50):
+def list_instructions(
+    request,
+    status: Instruction.Status | None = None,
+    limit: int = Query(50, ge=1, le=500),
+):
     rows = Instruction.objects.select_related("user")
     if status:
         rows = rows.filter(status=status)
-    return rows[: max(1, min(limit, 500))]
+    return rows[:limit]
 
 
 @router.get("/instructions/{instruction_id}", response=InstructionOut, tags=["instructions"])
-def instruction_detail(request, instruction_id: int):
-    return get_object_or_404(Instruction.objects.select_related("user"), pk=instruction_id)
+def instruction_detail(request, instruction_id: int = path_id()):
+    return get_or_404(Instruction.objects.select_related("user"), "instruction_id", pk=instruction_id)
 
 
-@router.post("/instructions", response={201: InstructionOut}, tags=["instructions"])
+@router.post(
+    "/instructions", response={201: InstructionOut}, tags=["instructions"], auth=api_auth("instruct")
+)
 def create_instruction(request, payload: InstructionIn):
-    require_perm(request, CONTROL_PERM)
+    """Give an instruction in words, or send robots (by id) to a place: click-to-move, no words involved."""
     from execution.instructions import submit
 
-    return Status(201, submit(payload.text, request.user, source="api"))
+    if payload.robot_ids is not None:
+        text, parse = _move_by_ids(payload.robot_ids, payload.destination)
+        return Status(201, submit(text, request.user, source="api", parse=parse))
+    answer_to = None
+    if payload.answer_to is not None:
+        answer_to = get_or_404(
+            Instruction, "answer_to", pk=payload.answer_to, status=Instruction.Status.NEEDS_USER
+        )
+    return Status(201, submit(payload.text, request.user, source="api", answer_to=answer_to))
+
+
+def _move_by_ids(robot_ids: list[int], destination: Destination) -> tuple[str, dict]:
+    """The parse of "move these robots there", built from ids: a robot's name is never read as words."""
+    robots = list(Robot.objects.filter(pk__in=robot_ids))
+    missing = sorted(set(robot_ids) - {robot.pk for robot in robots})
+    if missing:
+        raise HttpError(422, f"robot_ids: no robot with id {', '.join(map(str, missing))}")
+    if destination.location is not None:
+        place = get_or_404(Location, "destination.location", pk=destination.location)
+        goal = {"name": place.name, "x": place.x, "y": place.y}
+        where = place.name
+    else:
+        goal = {"name": "", "x": destination.x, "y": destination.y}
+        where = f"({destination.x:g}, {destination.y:g})"
+    names = [robot.name for robot in robots]
+    step = {"action": "move", "robots": names, "destination": goal, "task": None, "speed": None}
+    text = f"move robots {', '.join(map(str, robot_ids))} to {where}"
+    parse = {"type": "I", "valid": True, "needs_user": False, "question": None, "steps": [step]}
+    return text, {**parse, "synonyms_used": {}, "reason": "click-to-move: robots given by id"}

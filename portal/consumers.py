@@ -1,35 +1,33 @@
 """WebSockets: one per page. Authenticate by the session, join groups, send the snapshot, then forward deltas.
 
 Close codes: 4401 not logged in, 4403 not allowed to view, 4404 no such robot.
-Commands from the browser (stop, teleop) are checked here against the user's role and the robot's lease
-exactly as the pages' POST views check them (both call ``run_command``).
+Commands from the browser (stop, teleop) are checked here against the role matrix (access.roles: ``COMMANDS``
+names each command's ability) and the robot's lease exactly as the pages' POST views check them (both call
+``run_command``). What a browser sends is decoded and rate-limited by portal.socket_input; every malformed,
+unknown, refused or dropped message is answered with a ``command.result`` saying why, never a traceback.
 """
 
 import logging
 import math
+from dataclasses import dataclass
 
 from channels.consumer import get_handler_name
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncJsonWebsocketConsumer
+from django.db import DatabaseError
 
 import live
-from access.roles import ALERT_VIEW_PERM, can_control
+from access.roles import may, refusal
 from execution import fast_stop
 from execution.held_teleop import HeldTeleop
-from portal import snapshots
+from portal import snapshots, socket_input
+from portal.socket_input import BadFrame
 
-VIEW_PERM = "robots.view_robot"
 log = logging.getLogger(__name__)
 
 
 class CommandError(Exception):
     """A command that is refused or malformed; the message says why, in words."""
-
-
-def _int_list(ids) -> list[int]:
-    if not isinstance(ids, list) or not all(isinstance(pk, int) for pk in ids):
-        raise CommandError('robots: give "all" or a list of robot ids')
-    return ids
 
 
 def _number(content: dict, field: str) -> float:
@@ -45,23 +43,42 @@ def _control():
     return control
 
 
+def _in_words(exc: Exception) -> str:
+    """What a person reads about a failure: refusals and link errors as they are; the database and anything
+    unexpected in general words (the log keeps the details), so no raw SQL error reaches a page."""
+    if isinstance(exc, DatabaseError):
+        return "the database is busy or unavailable; try again in a moment"
+    if isinstance(
+        exc, CommandError | ValueError | LookupError | PermissionError | ConnectionError | TimeoutError
+    ):
+        return str(exc) or exc.__class__.__name__
+    from access.leases import ControlRefused
+    from execution.link import LinkError
+    from robots.rosbridge.errors import RosbridgeError
+
+    if isinstance(exc, ControlRefused | LinkError | RosbridgeError):
+        return str(exc) or exc.__class__.__name__
+    return f"could not be done: an internal error ({exc.__class__.__name__}), logged for the admins"
+
+
 def _call(action, *args):
     """Run a control action; whatever it refuses or fails with becomes an answer for the person."""
     try:
         return action(*args)
     except Exception as exc:  # a refusal, an unbound topic, a link that is down: all said in words
-        log.warning("command %s refused or failed: %s", getattr(action, "__name__", action), exc)
-        raise CommandError(str(exc) or exc.__class__.__name__) from exc
+        log.warning("command %s refused or failed: %r", getattr(action, "__name__", action), exc)
+        raise CommandError(_in_words(exc)) from exc
 
 
 def command_stop(user, content: dict) -> str:
     """Stop the robots named (or all), held by someone else or not: a stop always gets through."""
     from robots.models import Robot
 
-    if not can_control(user):
-        raise CommandError(f"{user.username} may only view robots, not command them.")
-    ids = content.get("robots", "all")
-    robots = list(Robot.objects.all() if ids == "all" else Robot.objects.filter(pk__in=_int_list(ids)))
+    try:
+        ids = socket_input.robot_ids(content.get("robots", "all"))
+    except BadFrame as exc:
+        raise CommandError(str(exc)) from None
+    robots = list(Robot.objects.all() if ids == "all" else Robot.objects.filter(pk__in=ids))
     results = _call(_control().stop, robots, user) if robots else {}
     unreached = [f"{name}: {result}" for name, result in (results or {}).items() if result != "stopped"]
     stopped = ", ".join(robot.name for robot in robots) or "no robot"
@@ -70,10 +87,11 @@ def command_stop(user, content: dict) -> str:
 
 def teleop_checks(user, content: dict):
     """The checks of a teleop command (role, lease, running instruction, move topic): its grant, or why not."""
-    robot_id = content.get("robot")
-    if not isinstance(robot_id, int) or isinstance(robot_id, bool):
-        raise CommandError("robot: no such robot")
-    grant = _control().teleop_grants([robot_id], user)[robot_id]
+    try:
+        robot_id = socket_input.robot_id(content.get("robot"))
+    except BadFrame as exc:
+        raise CommandError(str(exc)) from None
+    grant = _call(_control().teleop_grants, [robot_id], user)[robot_id]
     if isinstance(grant, Exception):
         log.warning("teleop refused: %s", grant)
         raise _refusal(grant)
@@ -82,7 +100,7 @@ def teleop_checks(user, content: dict):
 
 def _refusal(exc: Exception) -> CommandError:
     """A refusal of control.teleop_grants in the person's words."""
-    return CommandError("robot: no such robot" if isinstance(exc, ValueError) else str(exc))
+    return CommandError("robot: no such robot" if isinstance(exc, ValueError) else _in_words(exc))
 
 
 def command_teleop(user, content: dict) -> str:
@@ -98,7 +116,11 @@ def checked_teleops(user, robot_ids) -> dict:
 
     Refusals are audited as run_command audits them.
     """
-    grants = _control().teleop_grants(robot_ids, user)
+    try:
+        grants = _control().teleop_grants(robot_ids, user)
+    except DatabaseError as exc:  # said in general words: no raw database error reaches the page
+        log.warning("teleop checks failed: %r", exc)
+        return dict.fromkeys(robot_ids, CommandError(_in_words(exc)))
     for robot_id, grant in grants.items():
         if isinstance(grant, Exception):
             grants[robot_id] = _refusal(grant)
@@ -106,28 +128,52 @@ def checked_teleops(user, robot_ids) -> dict:
     return grants
 
 
-COMMANDS = {"stop": command_stop, "teleop": command_teleop}
+@dataclass(frozen=True)
+class Command:
+    """One message type a page may send: its handler and the ability (access.roles.ABILITIES) it needs."""
+
+    handler: object
+    ability: str
+
+
+COMMANDS = {
+    "stop": Command(command_stop, "control"),
+    "teleop": Command(command_teleop, "control"),
+}
 
 
 def refused(user, name, exc: CommandError) -> None:
     from audit import records as audit
 
-    audit.record(user, "command.refused", name, reason=str(exc))
+    audit.record(user, "command.refused", str(name)[:40], reason=str(exc))
+
+
+def result(content, ok: bool, detail: str) -> dict:
+    """The answer to one message: which command, the browser's ref, whether it was done, and why not."""
+    name = content.get("command") if isinstance(content, dict) else None
+    ref = content.get("ref") if isinstance(content, dict) else None
+    name = name if isinstance(name, str) and len(name) <= 40 else None
+    ref = ref if isinstance(ref, str | int) and not isinstance(ref, bool) and len(str(ref)) <= 100 else None
+    return {"type": "command.result", "command": name, "ref": ref, "ok": ok, "detail": detail}
 
 
 def run_command(user, content) -> dict:
     """Run one browser command; the reply says whether it was done and why not."""
     name = content.get("command") if isinstance(content, dict) else None
-    handler = COMMANDS.get(name)
-    reply = {"type": "command.result", "command": name, "ref": content.get("ref") if name else None}
-    if handler is None:
-        return {**reply, "ok": False, "detail": f"command: unknown, expected one of {sorted(COMMANDS)}"}
+    command = COMMANDS.get(name) if isinstance(name, str) else None
+    if command is None:
+        return result(content, False, f"command: unknown, expected one of {sorted(COMMANDS)}")
     try:
-        detail = handler(user, content)
+        if not may(user, command.ability):
+            raise CommandError(refusal(user, command.ability))
+        detail = command.handler(user, content)
     except CommandError as exc:
         refused(user, name, exc)
-        return {**reply, "ok": False, "detail": str(exc)}
-    return {**reply, "ok": True, "detail": detail}
+        return result(content, False, str(exc))
+    except Exception as exc:  # a bug or the database: said in words, kept in the log
+        log.exception("command %s failed", name)
+        return result(content, False, _in_words(exc))
+    return result(content, True, detail)
 
 
 class _PageConsumer(AsyncJsonWebsocketConsumer):
@@ -139,20 +185,27 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         if user is None or not user.is_authenticated:
             await self.close(code=4401)
             return
-        if not await database_sync_to_async(user.has_perm)(VIEW_PERM):
+        self.abilities = await database_sync_to_async(self.granted)(user)
+        if not self.abilities["view"]:
             await self.close(code=4403)
             return
         snapshot = await database_sync_to_async(self.snapshot)()
         if snapshot is None:
             await self.close(code=4404)
             return
-        self.may_control = await database_sync_to_async(can_control)(user)
+        self.may_control = self.abilities["control"]
+        self.limiter = socket_input.RateLimiter()
         if self.may_control:
             fast_stop.TARGETS.refresh()  # what a stop from this page needs, loaded before it is pressed
         self.joined = self.group_names()
         for group in self.joined:
             await self.channel_layer.group_add(group, self.channel_name)
         await self.send_json(snapshot)
+
+    @staticmethod
+    def granted(user) -> dict[str, bool]:
+        """The abilities a socket's commands need, asked once at connect."""
+        return {name: may(user, name) for name in {"view", *(c.ability for c in COMMANDS.values())}}
 
     async def dispatch(self, message):
         """Channels' dispatch without its per-message close_old_connections, a hop to the one shared sync
@@ -169,21 +222,41 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         for group in getattr(self, "joined", ()):
             await self.channel_layer.group_discard(group, self.channel_name)
 
+    async def receive(self, text_data=None, bytes_data=None, **kwargs):
+        """Every frame: decoded and rate-limited (portal.socket_input), then one command; bad ones answered."""
+        if getattr(self, "limiter", None) is None:
+            return  # closed at connect (not logged in, not allowed): nothing is read
+        try:
+            content = socket_input.decode(text_data, bytes_data)
+        except BadFrame as exc:
+            await self.refuse({}, str(exc), key=("frame",))
+            return
+        key = socket_input.rate_key(content)
+        if not self.limiter.allow(key):
+            if self.limiter.warn(key):
+                await self.refuse(content, f"rate: more than {self.limiter.rate:g} {key[0]} messages a second; "
+                                  "the extra ones were dropped")  # fmt: skip
+            return
+        await self.receive_json(content)
+
+    async def refuse(self, content, detail: str, key=None) -> None:
+        """Answer a message that was not run; malformed frames are rate-limited like any other."""
+        if key is not None and not self.limiter.allow(key):
+            return
+        await self.send_json(result(content, False, detail))
+
     async def receive_json(self, content, **kwargs):
         user = self.scope["user"]
-        if not user.is_authenticated:
-            return
-        if isinstance(content, dict) and content.get("command") == "teleop":
+        if content.get("command") == "teleop" and self.abilities["control"]:
             await self.take_teleop(user, content)
             return
-        if (
-            isinstance(content, dict)
-            and content.get("command") == "stop"
-            and getattr(self, "may_control", False)
-        ):
-            ids = content.get("robots", "all")
-            if ids == "all" or (isinstance(ids, list) and all(isinstance(pk, int) for pk in ids)):
-                await fast_stop.stop_now(ids)  # a head start; run_command below checks, stops again, answers
+        if content.get("command") == "stop" and self.abilities["control"]:
+            try:
+                ids = socket_input.robot_ids(content.get("robots", "all"))
+            except BadFrame as exc:
+                await self.refuse(content, str(exc))
+                return
+            await fast_stop.stop_now(ids)  # a head start; run_command below checks, stops again, answers
         # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
         reply = await database_sync_to_async(run_command, thread_sensitive=False)(user, content)
         await self.send_json(reply)
@@ -191,10 +264,10 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
     async def take_teleop(self, user, content) -> None:
         """Held buttons: checked once per press, repeats published from this loop (execution.held_teleop)."""
         try:
+            socket_input.robot_id(content.get("robot"))
             linear, angular = _number(content, "linear"), _number(content, "angular")
-        except CommandError as exc:
-            reply = {"type": "command.result", "command": "teleop", "ref": content.get("ref")}
-            await self.send_json({**reply, "ok": False, "detail": str(exc)})
+        except (BadFrame, CommandError) as exc:
+            await self.refuse(content, str(exc))
             return
         if getattr(self, "teleop", None) is None:
             self.teleop = HeldTeleop(user, self.send_json, checked_teleops, _control())
@@ -242,13 +315,15 @@ class RobotConsumer(_PageConsumer):
         from robots.models import Robot
 
         self.robot_id = self.scope["url_route"]["kwargs"]["robot_id"]
+        if not 1 <= self.robot_id <= socket_input.MAX_ID:
+            return None
         robot = Robot.objects.filter(pk=self.robot_id).first()
         return snapshots.robot_snapshot(robot) if robot else None
 
     async def fleet_poses(self, event):
         mine = [pose for pose in event["poses"] if pose["id"] == self.robot_id]
         if mine:
-            await self.send_json({"type": "robots.poses", "poses": mine})
+            await self.send_json({"type": "fleet.poses", "poses": mine})
 
 
 class AlertsConsumer(AsyncJsonWebsocketConsumer):
@@ -260,7 +335,7 @@ class AlertsConsumer(AsyncJsonWebsocketConsumer):
         if user is None or not user.is_authenticated:
             await self.close(code=4401)
             return
-        if not await database_sync_to_async(user.has_perm)(ALERT_VIEW_PERM):
+        if not await database_sync_to_async(may)(user, "view_alerts"):
             await self.close(code=4403)
             return
         await self.channel_layer.group_add(live.ALERTS_GROUP, self.channel_name)

@@ -7,18 +7,17 @@ small POST views at the end of this module, which answer JSON to fetch() and red
 import json
 
 from django.contrib import messages
-from django.core.exceptions import PermissionDenied
 from django.core.paginator import Paginator
-from django.http import JsonResponse
+from django.http import Http404, JsonResponse
 from django.shortcuts import get_object_or_404, redirect, render
-from django.views.decorators.http import require_POST
 
-from access.roles import ALERT_HANDLE_PERM, ALERT_VIEW_PERM, AUDIT_PERM, REGISTER_PERM
+from access.roles import may, requires
 from alerts.models import Alert
 from audit.models import AuditEntry
 from execution.models import Instruction, TimeSlot
 from places.models import Location, Map
 from portal import snapshots
+from portal.api_types import MAX_ID, ids_from_text
 from portal.consumers import run_command
 from robots.models import Binding, RegistrationRecord, Robot
 
@@ -49,10 +48,15 @@ def _payload(request) -> dict:
 
 
 def _get_robot_for_user(request, pk: int) -> Robot:
-    """The robot, if the user may see robots at all."""
-    if not request.user.has_perm("robots.view_robot"):
-        raise PermissionDenied("You may not view robots.")
-    return get_object_or_404(Robot, pk=pk)
+    """The robot (the view's @requires mark has already checked that the user may see robots)."""
+    return _get_or_404(Robot, pk)
+
+
+def _get_or_404(model, pk: int):
+    """The row, or 404; a key no database can hold is simply not found (SQLite would raise)."""
+    if not 1 <= pk <= MAX_ID:
+        raise Http404(f"No {model._meta.verbose_name} {pk}.")
+    return get_object_or_404(model, pk=pk)
 
 
 def _map_context() -> dict:
@@ -75,6 +79,7 @@ def _map_context() -> dict:
     }
 
 
+@requires("view")
 def dashboard(request):
     """The fleet at a glance: live map, robots, instruction console."""
     map_data = _map_context()
@@ -88,11 +93,13 @@ def dashboard(request):
     return render(request, "fleet/dashboard.html", context)
 
 
+@requires("view")
 def robot_list(request):
     """Every robot with its link, state, current instruction and speed (live)."""
     return render(request, "fleet/robot_list.html", {"robots": snapshots.robot_rows(Robot.objects.all())})
 
 
+@requires("view")
 def robot_detail(request, pk: int):
     """One robot: bindings and how each was found, its ROS graph, URDF facts, history, teleop and lease."""
     robot = _get_robot_for_user(request, pk)
@@ -111,6 +118,7 @@ def robot_detail(request, pk: int):
     return render(request, "fleet/robot_detail.html", context)
 
 
+@requires("view")
 def registration(request):
     """Register endpoints and resolve the bindings the engine was unsure of."""
     context = {
@@ -122,12 +130,10 @@ def registration(request):
     return render(request, "fleet/registration.html", context)
 
 
-@require_POST
+@requires(POST="edit_bindings")
 def choose_binding(request, pk: int):
     """A person picks the topic or service for one action of one robot (a form, so it works without JS)."""
-    if not request.user.has_perm(REGISTER_PERM):
-        raise PermissionDenied("Only admins resolve bindings.")
-    binding = get_object_or_404(Binding.objects.select_related("robot"), pk=pk)
+    binding = _get_or_404(Binding, pk)
     target = request.POST.get("target", "")
     if target not in {candidate.get("target") for candidate in binding.candidates}:
         messages.error(request, f"target: {target!r} is not one of the candidates for {binding}.")
@@ -143,6 +149,7 @@ def _schedule_columns(slots) -> list[tuple]:
     return sorted({(slot.start, slot.end) for slot in slots})
 
 
+@requires("view")
 def schedules(request):
     """Robots × time slots, the shape of the paper's Table 12; admins edit cells in place."""
     slots = list(TimeSlot.objects.select_related("robot", "goal"))
@@ -183,6 +190,7 @@ def _timings(instruction) -> list[dict]:
     return stages
 
 
+@requires("view")
 def history(request):
     """Instructions, newest first, with filters and each instruction's timings."""
     rows, filters = _filtered_instructions(request)
@@ -206,10 +214,9 @@ def _query_without_page(request) -> str:
     return query.urlencode()
 
 
+@requires("read_audit")
 def audit(request):
     """Who did what, when: for admins."""
-    if not request.user.has_perm(AUDIT_PERM):
-        raise PermissionDenied("Only admins see the audit trail.")
     rows = AuditEntry.objects.select_related("user")
     action, who = request.GET.get("action", "").strip(), request.GET.get("user", "").strip()
     if action:
@@ -228,16 +235,17 @@ def audit(request):
     return render(request, "fleet/audit.html", context)
 
 
+@requires("view_alerts")
 def alerts(request):
     """Incidents: the open ones first, then the resolved ones, newest first; operators act on them here."""
-    if not request.user.has_perm(ALERT_VIEW_PERM):
-        raise PermissionDenied("You may not view alerts.")
     related = ("robot", "acknowledged_by", "resolved_by")
-    resolved = Paginator(Alert.objects.resolved().select_related(*related), 50).get_page(request.GET.get("page"))
+    resolved = Paginator(Alert.objects.resolved().select_related(*related), 50).get_page(
+        request.GET.get("page")
+    )
     context = {
         "open_alerts": Alert.objects.open().select_related(*related),
         "page": resolved,
-        "can_handle": request.user.has_perm(ALERT_HANDLE_PERM),
+        "can_handle": may(request.user, "handle_alerts"),
     }
     return render(request, "fleet/alerts.html", context)
 
@@ -250,18 +258,18 @@ def _answer(request, ok: bool, detail: str, status: int = 200, **extra):
     return redirect(request.META.get("HTTP_REFERER") or "dashboard")
 
 
-@require_POST
+@requires(POST="control")
 def stop(request):
     """The stop button: stop the given robots (or all) that this user may command."""
     payload = _payload(request)
     robots = payload.get("robots", "all")
     if isinstance(robots, str) and robots != "all":
-        robots = [int(pk) for pk in robots.split(",") if pk.strip().isdigit()]
+        robots = ids_from_text(robots.split(","))
     reply = run_command(request.user, {"command": "stop", "robots": robots})
     return _answer(request, reply["ok"], reply["detail"], 200 if reply["ok"] else 403)
 
 
-@require_POST
+@requires(POST="control")
 def teleop(request, pk: int):
     """Drive a robot at the given speeds (the robot page's buttons, without a WebSocket)."""
     payload = _payload(request)
@@ -275,7 +283,7 @@ def teleop(request, pk: int):
     return _answer(request, reply["ok"], reply["detail"], 200 if reply["ok"] else 403)
 
 
-@require_POST
+@requires(POST="control")
 def lease(request, pk: int):
     """Take, renew or release control of a robot; everyone sees who holds it."""
     from access import leases

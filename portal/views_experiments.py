@@ -1,21 +1,19 @@
 """The experiments page: run response-time and success-rate experiments on chosen robots, list and plot runs."""
 
 from django.contrib import messages
-from django.core.exceptions import PermissionDenied
 from django.shortcuts import redirect, render
 
+from access.roles import may, requires
 from experiments.models import ExperimentRun
 from experiments.runs import KINDS, ExperimentError, start_run
+from portal.api_types import ids_from_text
 from robots.models import Robot
 
-RUN_PERM = "experiments.add_experimentrun"
 
-
+@requires(GET="view", POST="run_experiments")
 def experiments(request):
     """GET: the form and the last runs; POST: start a run (operators only, with the confirmation ticked)."""
     if request.method == "POST":
-        if not request.user.has_perm(RUN_PERM):
-            raise PermissionDenied("You may only view experiments, not run them.")
         return _start(request)
     runs = ExperimentRun.objects.select_related("user").prefetch_related("robots")[:20]
     return render(
@@ -25,18 +23,16 @@ def experiments(request):
             "robots": Robot.objects.all(),
             "kinds": KINDS,
             "runs": runs,
-            "can_run": request.user.has_perm(RUN_PERM),
+            "can_run": may(request.user, "run_experiments"),
         },
     )
 
 
 def _start(request):
-    ids = [int(pk) for pk in request.POST.getlist("robots") if pk.isdigit()]
-    try:
-        trials = int(request.POST.get("trials", "3"))
-    except ValueError:
-        trials = 0
-    params = {"trials": trials, "goal": request.POST.get("goal", "A")[:50]}
+    ids = ids_from_text(request.POST.getlist("robots"))
+    trials = request.POST.get("trials", "3").strip()
+    trials = int(trials) if trials.isascii() and trials.isdigit() and len(trials) < 6 else 0
+    params = {"trials": trials, "goal": request.POST.get("goal", "A").replace("\x00", "")[:50]}
     try:
         run = start_run(
             request.POST.get("kind", ""),

@@ -11,7 +11,7 @@ robot_description param (`/robot1/robot_description`, ROS 2 `/robot1/robot_state
 or at least two nodes and a velocity topic somebody subscribes to. Each such namespace is one robot named
 after it ("robot1"); root-level topics of a namespaced endpoint are shared and appear in every robot's graph.
 An endpoint without namespaces is one robot, named after the URDF's `<robot name=...>` if there is one,
-else `<host>-<port>` of the endpoint.
+else by registration after its model (`turtlebot3_burger`, then `turtlebot3_burger_2`, ...).
 
 Infrastructure is never a robot nor a robot's topic (protocol §7): rosapi, rosbridge_websocket, rosout,
 /client_count, /connected_clients, /parameter_events, /gazebo/*, */get_loggers, */set_logger_level and the
@@ -296,7 +296,7 @@ async def read_robot_facts(client: RosbridgeClient, graph: Graph) -> None:
             graph.params[name] = reply.get("value")
     _read_urdf(graph)
     if not graph.name:
-        graph.name = graph.urdf.name if graph.urdf and graph.urdf.name else endpoint_label(graph.url)
+        graph.name = graph.urdf.name if graph.urdf and graph.urdf.name else ""  # registration names it
     graph.start_pose, graph.start_pose_source = await start_pose(client, graph)
 
 

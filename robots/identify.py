@@ -13,7 +13,8 @@ linear in the number of topics, not the paper's O(n^4)), then a score adds up:
 - graph facts: for odometry +0.25 when the robot's navigation stack subscribes to it (Husky: the EKF's
   /odometry/filtered over the controller's raw odometry); for move, the twist_mux rule below. The best candidate is bound with confidence = min(1, score). A tie, or no candidate
   for move or odometry, binds nothing: needs_user, with the candidates kept for a person. Optional actions
-  (navigate, pose, scan, map, initial_pose, battery) with no candidate are simply absent, not a question.
+  (navigate, pose, scan, map, initial_pose, battery, dock) with no candidate are simply absent, not a question.
+- An action server whose type is a role's own (dock: irobot_create_msgs/action/Dock) scores as a topic would.
 
 twist_mux rule (move). A node that subscribes two or more velocity topics and publishes one is a mux.
 We bind one of its INPUTS, never its output: the output is the base controller's own input
@@ -157,7 +158,7 @@ FACT_RULES = {"move": _move_facts, "odometry": _odometry_facts, "map": _map_fact
 
 
 def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:
-    """Score every topic once for the actions its type can serve; add action servers for navigate."""
+    """Score every topic once for the actions its type can serve; add action servers for dock and navigate."""
     facts = graph_facts(graph)
     by_type: dict[str, list[str]] = {}
     for action, rule in RULES.items():
@@ -169,12 +170,17 @@ def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:
             rule = RULES[action]
             if not (info.subscribers if rule.side == "sub" else info.publishers):
                 continue
+            if action == "navigate" and name not in facts.nav_subscribed:
+                continue  # a goal topic no navigation stack consumes (Spot's body-frame go_to_pose) moves nothing
             score, how = name_score(graph.relative(name), action, vocab, rule.canonical)
             extra = FACT_RULES.get(action)
             total = 0.5 + score + (extra(name, facts) if extra else 0.0)
             found[action].append(Candidate(name, info.type, "topic", round(total, 4), how))
     for name, type_ in graph.actions.items():
         relative = graph.relative(name)
+        for action in by_type.get(norm_type(type_), ()):  # a server of the role's own type (dock: Create 3's)
+            score, how = name_score(relative, action, vocab, RULES[action].canonical)
+            found[action].append(Candidate(name, type_, "action", round(0.5 + score, 4), how))
         score, how = name_score(relative, "navigate", vocab, NAV_ACTIONS)
         if score <= 0.1 and "navigat" not in relative:
             continue  # another action server (arm, spin, dock): not navigation

@@ -1,7 +1,9 @@
 """Registered robots and the ROS graph discovered behind each rosbridge endpoint."""
 
 import logging
+import re
 
+from django.core.exceptions import ValidationError
 from django.db import models
 from django.utils import timezone
 
@@ -43,6 +45,40 @@ class RobotManager(models.Manager):
         return current._record_transition(to_state, reason, instruction)
 
 
+ROBOT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")
+# Words instructions use to join steps and choose robots (interpreter.lexicon's AND, THEN, ALL, PREP): a robot
+# named one of them would read as grammar ("move and to A"). Names are data; they must never parse as words.
+RESERVED_NAMES = frozenset({
+    "and", "or", "plus", "also", "then", "next", "later", "finally", "all", "every", "each", "everyone",
+    "everybody", "everything", "fleet", "to", "at", "in", "on", "into", "towards", "toward", "till", "until",
+    "onto", "stop", "times",
+})  # fmt: skip
+
+
+def validate_robot_name(name: str) -> None:
+    """Letters, digits, dash and underscore, starting with a letter or digit; not only digits; not a word
+    instructions use. So a name is one word the interpreter can only read as that robot."""
+    if not ROBOT_NAME.fullmatch(name or ""):
+        raise ValidationError(
+            "%(name)r: a robot name uses letters, digits, dashes and underscores only (no spaces).",
+            code="robot_name",
+            params={"name": name},
+        )
+    if name.isdigit() or name.casefold() in RESERVED_NAMES:
+        raise ValidationError(
+            "%(name)r: a robot name must not be a number or a word instructions use (and, then, all, to, ...).",
+            code="robot_name_reserved",
+            params={"name": name},
+        )
+
+
+def robot_name_from(text: str) -> str:
+    """A valid robot name made from what a robot says of itself (URDF name, namespace) or its host-port:
+    other characters become dashes; a number or a reserved word gets the prefix "robot-"."""
+    name = re.sub(r"[^A-Za-z0-9_-]+", "-", text or "").strip("-_")[:90] or "robot"
+    return f"robot-{name}" if name.isdigit() or name.casefold() in RESERVED_NAMES else name
+
+
 class Robot(models.Model):
     """One robot reachable through a rosbridge endpoint, possibly under a namespace."""
 
@@ -59,7 +95,12 @@ class Robot(models.Model):
     # The paper's Figure 5 states; the one enum of them is fleetcore.states.State (transitions: its table).
     State = models.TextChoices("State", [(state.name, state.value) for state in RobotState])
 
-    name = models.CharField(max_length=100, unique=True)
+    name = models.CharField(
+        max_length=100,
+        unique=True,
+        validators=[validate_robot_name],
+        help_text="letters, digits, dashes and underscores; e.g. husky, tb3_0, robot-2",
+    )
     model = models.CharField(max_length=100, blank=True, help_text="e.g. turtlebot3_burger, husky, tiago")
     drive = models.CharField(max_length=10, choices=Drive.choices, default=Drive.OTHER)
     wheel_count = models.PositiveSmallIntegerField(null=True, blank=True)

@@ -7,7 +7,7 @@ How the link process (``manage.py robotlinks``) drives it::
 
     hub = PoseHub()                                   # one per process, in its event loop
     manager = LinkManager(hooks=[link_hook(hub)])     # subscribes odometry (and amcl pose) per robot
-    await asyncio.gather(manager.run(), hub.run(stop)) # one batched "robots.poses" message per tick
+    await asyncio.gather(manager.run(), hub.run(stop)) # one batched "fleet.poses" message per tick
 
 Callbacks take the decoded ROS message (a dict) and may be called from any thread. ``link_hook(hub)`` does
 the subscribing on the links process's own rosbridge links; without a link process, ``follow(robots, hub,

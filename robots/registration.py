@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -19,7 +20,7 @@ from django.utils import timezone
 from audit import records as audit
 from robots import identify, kinematics
 from robots.discovery import Graph, discover
-from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic
+from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic, robot_name_from
 from robots.rosbridge import RosbridgeClient, RosbridgeError
 from robots.signals import robots_registered
 
@@ -112,10 +113,10 @@ def store_robot(url: str, graph: Graph, vocab: identify.Vocabulary) -> tuple[Rob
     """Create or update one robot and its graph; return it with the changes."""
     robot = Robot.objects.filter(endpoint=url, namespace=graph.namespace).first()
     changes: dict = {}
-    if robot is None:
-        robot = Robot(endpoint=url, namespace=graph.namespace, name=unique_name(graph.name, url))
-        changes["created"] = True
     model = kinematics.guess_model(graph)
+    if robot is None:
+        robot = Robot(endpoint=url, namespace=graph.namespace, name=unique_name(graph.name, model))
+        changes["created"] = True
     max_linear, max_angular, limits_source = kinematics.limits(graph, model)
     facts = graph.urdf
     robot.model = model
@@ -141,17 +142,16 @@ def store_robot(url: str, graph: Graph, vocab: identify.Vocabulary) -> tuple[Rob
     return robot, changes
 
 
-def unique_name(name: str, url: str) -> str:
-    """The robot's name, or `<name>-<host>-<port>` (then a counter) if another endpoint's robot has it."""
-    from robots.discovery import endpoint_label
+def unique_name(name: str, model: str = "") -> str:
+    """The robot's name, else its model's (or "robot"), then `_2`, `_3`... if taken: never a host or port.
 
-    candidate = name or endpoint_label(url)
-    if not Robot.objects.filter(name=candidate).exists():
-        return candidate
-    base = f"{candidate}-{endpoint_label(url)}"
+    Names are words of the instructions people type ("move turtlebot3_burger_2 to A"), so they hold letters,
+    digits, `_` and `-` only.
+    """
+    base = robot_name_from(re.sub(r"[^0-9A-Za-z_-]+", "_", name or model or "robot").strip("_-"))
     candidate, n = base, 2
     while Robot.objects.filter(name=candidate).exists():
-        candidate, n = f"{base}-{n}", n + 1
+        candidate, n = f"{base}_{n}", n + 1
     return candidate
 
 

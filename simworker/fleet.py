@@ -13,6 +13,7 @@ from fleetcore.catalog import model
 from fleetcore.planning import Planner
 from fleetcore.world import World, load_world
 from simworker import rosapi
+from simworker.docking import DockServer
 from simworker.graph import Graph
 from simworker.navstack import MoveBase, Nav2
 from simworker.physics import DEFAULT_DT, Physics
@@ -24,6 +25,7 @@ log = logging.getLogger("simworker.fleet")
 NAV_HZ = 10.0  # move_base controller_frequency of the TurtleBot3 configuration
 SLOW_HZ = 5.0  # laser (TB3 LDS 5 Hz), actionlib status (5 Hz)
 AMCL_HZ = 2.0
+DOCK_STATUS_HZ = 1.0
 STACKS = {"move_base": MoveBase, "nav2": Nav2}
 
 
@@ -71,6 +73,7 @@ class SimFleet:
                 self.servers[ep.key] = RosbridgeServer(ep.key, Graph(ep.ros_version, self.clock), port)
         self.robots: dict[str, SimRobot] = {}
         self.stacks: list = []
+        self.docks: list[DockServer] = []
         planners: dict[str, Planner] = {}
         for spec in self.world.robots:
             if spec.endpoint in self.servers:
@@ -91,6 +94,8 @@ class SimFleet:
             stack = STACKS[spec.stack](robot, planners[profile.key])
             robot.navigator = stack
             self.stacks.append(stack)
+            if spec.dock is not None:  # the world allows a dock on nav2 robots only
+                self.docks.append(DockServer(stack, spec.dock))
 
     def clock(self) -> float:
         """Return the simulated ROS time (wall time at start plus simulated seconds)."""
@@ -133,7 +138,7 @@ class SimFleet:
         loop = asyncio.get_running_loop()
         period = self.physics.dt / self.time_scale
         next_t = self.stats.started = loop.time()
-        due = dict.fromkeys(("odom", "nav", "slow", "amcl"), 0.0)
+        due = dict.fromkeys(("odom", "nav", "slow", "amcl", "dock"), 0.0)
         while not self._stop.is_set():
             self.physics.step()
             self.stats.steps += 1
@@ -149,7 +154,7 @@ class SimFleet:
             await asyncio.sleep(max(delay, 0.0))
 
     def _publish(self, due: dict[str, float]) -> None:
-        """Run the periodic publishers whose time has come (odometry 20 Hz, nav 10 Hz, laser 5 Hz)."""
+        """Run the periodic publishers whose time has come (odometry 20 Hz, nav and docking 10 Hz, laser 5 Hz)."""
         t = self.physics.time
         stamp = self.clock()
         if t >= due["odom"]:
@@ -161,6 +166,9 @@ class SimFleet:
             for stack in self.stacks:
                 if stack.nav.active:
                     stack.tick(stamp)
+            for dock in self.docks:
+                if dock.active:
+                    dock.tick(stamp)
         if t >= due["slow"]:
             due["slow"] += 1.0 / SLOW_HZ
             for robot in self.robots.values():
@@ -171,6 +179,10 @@ class SimFleet:
             due["amcl"] += 1.0 / AMCL_HZ
             for stack in self.stacks:
                 stack.publish_amcl_pose()
+        if t >= due["dock"]:
+            due["dock"] += 1.0 / DOCK_STATUS_HZ
+            for dock in self.docks:
+                dock.publish_status(stamp)
 
     def pose(self, name: str) -> tuple[float, float, float]:
         """Return a robot's ground-truth pose (call from the loop's thread)."""

@@ -182,6 +182,7 @@ class Nav2(NavStack):
         super().__init__(robot, planner)
         self.goal: ActionGoal | None = None
         self.started = 0.0
+        self.docking = None  # the robot's DockServer (simworker/docking.py) if it has a dock station
         robot.server.add_action(
             f"{self.ns}/navigate_to_pose", "nav2_msgs/action/NavigateToPose", self._send_goal
         )
@@ -196,6 +197,8 @@ class Nav2(NavStack):
         self._navigate(pose, goal)
 
     def _navigate(self, pose, goal: ActionGoal | None) -> None:
+        if self.docking is not None:
+            self.docking.preempt()  # one goal drives the base: navigating ends a dock goal as CANCELED
         if self.goal is not None:
             self.nav.stop(PREEMPTED, "preempted")
         self.goal, self.started = goal, time.monotonic()

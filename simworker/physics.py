@@ -131,6 +131,19 @@ class Physics:
         self.robots[name] = robot
         return robot
 
+    def add_fixture(self, x: float, y: float, yaw: float, length: float, width: float) -> None:
+        """Place a static box the map does not show (a dock station): robots bump into it, lasers see it."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        hl, hw = length / 2, width / 2
+        points = [
+            (x + c * dx * hl - s * dy * hw, y + s * dx * hl + c * dy * hw)
+            for dx, dy in ((-1, -1), (1, -1), (1, 1), (-1, 1))
+        ]
+        shape = pymunk.Poly(self.space.static_body, points)
+        shape.friction = 0.2
+        shape.filter = pymunk.ShapeFilter(categories=WALL_CATEGORY)
+        self.space.add(shape)
+
     def step(self) -> None:
         """Advance the world by one fixed dt."""
         self.space.step(self.dt)

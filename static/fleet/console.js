@@ -12,10 +12,16 @@ export class Console {
     if (form) form.addEventListener("submit", (event) => { event.preventDefault(); this.submit(this.input.value.trim()); });
   }
 
-  async submit(text) {
+  async submit(text, answerTo = null) {
     if (!text) return null;
+    return this.send(answerTo ? { text, answer_to: answerTo } : { text });
+  }
+
+  // body: { text } typed by a person, or { robot_ids, destination } from a click on the map or a location.
+  async send(body) {
+    const text = body.text;
     try {
-      const instruction = await request("/api/instructions", { text });
+      const instruction = await request("/api/instructions", body);
       this.showParse(instruction);
       this.track(instruction);
       if (this.input && this.input.value.trim() === text) this.input.value = "";
@@ -89,7 +95,8 @@ export class Console {
         return;
       }
       toast((taught && taught.message) || `Learned: ${text}`);
-      await this.submit(instruction.text); // ask again, now that the interpreter knows
+      await this.submit(instruction.text, instruction.id); // run it again, now that the interpreter knows
+      this.track({ ...instruction, status: "answered" });
     } catch (error) {
       toast(`Answer not understood: ${error.message}`, true);
     }

@@ -11,11 +11,12 @@ const mapData = document.getElementById("map-data") ? JSON.parse(document.getEle
 const canvas = document.getElementById("fleet-map");
 const console_ = new Console(document.getElementById("console-form"), document.getElementById("parse"), document.getElementById("progress") || document.createElement("ol"));
 
-function sendSelected(target) {
+// Click-to-move sends robot ids and a location id or a point: a robot's name is data, never instruction text.
+async function sendSelected(target) {
   const robots = table.selected();
   if (!robots.length) { toast("Select one or more robots in the table first.", true); return; }
-  const where = target.name ? target.name : `(${target.x}, ${target.y})`;
-  robots.forEach((robot) => console_.submit(`move ${robot.name} to ${where}`));
+  const destination = target.id != null ? { location: Number(target.id) } : { x: target.x, y: target.y };
+  await console_.send({ robot_ids: robots.map((robot) => robot.id), destination });
 }
 
 async function forSelected(action) {
@@ -39,7 +40,7 @@ if (table.pickAll) table.pickAll.addEventListener("change", () => table.selectAl
 document.querySelectorAll("button[data-selected]").forEach((button) => button.addEventListener("click", () => forSelected(button.dataset.selected)));
 
 const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, sendSelected) : null;
-document.querySelectorAll("button.goto").forEach((button) => button.addEventListener("click", () => sendSelected({ name: button.dataset.location })));
+document.querySelectorAll("button.goto").forEach((button) => button.addEventListener("click", () => sendSelected({ id: button.dataset.locationId, name: button.dataset.location })));
 
 connectLive("/ws/fleet/", {
   snapshot(message) {

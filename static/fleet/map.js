@@ -72,7 +72,7 @@ export class FleetMap {
     const box = this.canvas.getBoundingClientRect();
     const [x, y] = this.toWorld((event.clientX - box.left) * this.ratio, (event.clientY - box.top) * this.ratio);
     const near = this.locations.find((spot) => Math.hypot(spot.x - x, spot.y - y) < PICK_RADIUS_M);
-    this.onPick(near ? { name: near.name } : { x: Math.round(x * 10) / 10, y: Math.round(y * 10) / 10 });
+    this.onPick(near ? { id: near.id, name: near.name } : { x: Math.round(x * 10) / 10, y: Math.round(y * 10) / 10 });
   }
 
   setRobots(rows) {

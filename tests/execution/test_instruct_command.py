@@ -72,3 +72,23 @@ def test_instruct_speed_words_drive_the_robot_at_that_speed(turtle_world, fleet_
     assert abs(x - -1.6) < 0.15 and abs(y - -0.5) < 0.15  # it arrived
     limit = Instruction.objects.get().robots.get().max_linear * speed_factor(speed)
     assert 0.0 < fastest[0] <= limit * 1.05  # it moved, never faster than the word asked
+
+
+def test_an_answered_question_closes_keeping_its_type_and_names_what_ran(turtle_world, fleet_admin):
+    """Type V "zoom turtlebot to Dock", answered "zoom means move": the question is final, still type V, and
+    names the instruction that ran; that one moved the robot."""
+    from execution.instructions import submit
+    from interpreter import service
+    from tests.execution.helpers import wait_final
+
+    Location.objects.create(map=Location.objects.first().map, name="Dock", x=-1.6, y=-0.5)
+    question = submit("zoom turtlebot to Dock", fleet_admin)
+    assert (question.status, question.type) == ("needs_user", "V")
+    service.teach("zoom means move", fleet_admin, question.pk)
+    answer = wait_final(submit(question.text, fleet_admin, answer_to=question))
+    question.refresh_from_db()
+    assert (question.status, question.type) == ("answered", "V")
+    assert f"ran as #{answer.pk}" in question.outcome and answer.answer_to_id == question.pk
+    assert answer.status == "succeeded", answer.outcome
+    x, y, _ = turtle_world.call(turtle_world.fleet.robots["turtlebot"].pose)
+    assert abs(x - -1.6) < 0.15 and abs(y - -0.5) < 0.15

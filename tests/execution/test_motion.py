@@ -78,7 +78,12 @@ def test_clean_covers_the_square_around_the_location():
 
 @pytest.mark.parametrize(
     ("task", "parsed"),
-    [("rotate(5)", ("rotate", 5)), ("clean", ("clean", 1)), ("Rotate ( 2 )", ("rotate", 2))],
+    [
+        ("rotate(5)", ("rotate", 5)),
+        ("clean", ("clean", 1)),
+        ("Rotate ( 2 )", ("rotate", 2)),
+        ("rotate(0.25)", ("rotate", 0.25)),
+    ],
 )
 def test_parse_task(task, parsed):
     assert parse_task(task) == parsed

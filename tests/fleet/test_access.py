@@ -82,7 +82,7 @@ def test_viewer_sees_but_cannot_instruct(client_for, viewer):
     assert client.get("/api/robots").status_code == 200
     response = client.post("/api/instructions", {"text": "stop"}, content_type="application/json")
     assert response.status_code == 403
-    assert "permission" in response.json()["detail"]
+    assert "may not give instructions" in response.json()["detail"]
 
 
 @pytest.mark.django_db

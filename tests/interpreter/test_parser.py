@@ -148,3 +148,19 @@ def test_a_and_i_are_only_places_after_a_preposition(grammar):
     assert run(grammar, "move a robot to B")["steps"][0]["destination"]["name"] == "B"
     assert run(grammar, "move husky to a")["steps"][0]["destination"]["name"] == "A"
     assert run(grammar, "move husky to i")["steps"][0]["destination"]["name"] == "I"
+
+
+@pytest.mark.parametrize("name", ["tb3_nav2", "turtlebot3_burger_2", "robot-7", "spot2", "UGV_01-b"])
+def test_every_registered_name_is_understood(name):
+    """Names with digits, dashes and underscores are robots, as registration writes them."""
+    from interpreter.lexicon import Fleet, Grammar, Lexicon, RobotInfo
+    from interpreter.terms import seed_terms
+    from tests.interpreter.conftest import paper_fleet
+
+    fleet = paper_fleet()
+    grammar = Grammar(
+        Lexicon(seed_terms()), Fleet([*fleet.robots, RobotInfo(name, "husky", "wheeled")], fleet.places)
+    )
+    result = interpret(f"move {name} to A", grammar).as_dict()
+    assert result["type"] == "I", result["question"]
+    assert result["steps"][0]["robots"] == [name]

@@ -154,3 +154,79 @@ def seeded_terms(transactional_db):
     migration = importlib.import_module("interpreter.migrations.0002_seed_terms")
     migration.seed(apps, None)
     _fresh_interpreter()
+
+
+# --- the role matrix and the API fuzzing: a world whose robot nothing can reach ---------------------------
+
+
+@pytest.fixture
+def world(db):
+    """A robot (its endpoint a closed port: nothing is reached), a binding to choose, a slot, a location."""
+    from execution.models import TimeSlot
+    from places.models import Location, Map
+    from robots.models import Binding, Robot
+
+    grid = Map.objects.create(name="tiny", resolution=0.05, width=4, height=4, data=bytes(16))
+    place = Location.objects.create(map=grid, name="A", x=0.1, y=0.1)
+    robot = Robot.objects.create(
+        name="probe", endpoint=f"ws://127.0.0.1:{free_port()}", link_status=Robot.Link.ONLINE,
+        state=Robot.State.READY,
+    )  # fmt: skip
+    robot.topics.create(name="/cmd_vel", type="geometry_msgs/Twist")
+    Binding.objects.create(robot=robot, action="move", target="/cmd_vel", message_type="geometry_msgs/Twist")
+    binding = Binding.objects.create(
+        robot=robot, action="odometry", needs_user=True, candidates=[{"target": "/odom", "type": "x"}]
+    )
+    slot = TimeSlot.objects.create(robot=robot, start="08:00", end="09:00", goal=place, task="")
+    return {"robot": robot, "binding": binding, "slot": slot, "location": place}
+
+
+@pytest.fixture
+def recorded_control(monkeypatch):
+    """execution.control with its checks real and its effects recorded: no robot is driven or stopped."""
+    import importlib
+    import sys
+
+    import fleet
+
+    real = importlib.import_module("execution.control")
+    calls = []
+
+    class Control:
+        teleop_grants = staticmethod(real.teleop_grants)
+        GRANT_S = real.GRANT_S
+
+        @staticmethod
+        def stop(robots, user):
+            calls.append(("stop", user.username))
+            return {robot.name: "stopped" for robot in robots}
+
+        @staticmethod
+        def teleop_with(grant, user, linear, angular):
+            calls.append(("teleop", user.username))
+            return grant.clamp(linear, angular)
+
+        @staticmethod
+        async def publish_teleop(grant, linear, angular):
+            calls.append(("teleop", grant.robot_name))
+            return grant.clamp(linear, angular)
+
+        @staticmethod
+        def audit_teleops(user, batch):
+            return None
+
+    monkeypatch.setitem(sys.modules, "execution.control", Control)
+    monkeypatch.setattr(fleet, "control", Control, raising=False)
+    return calls
+
+
+@pytest.fixture
+def seeded_words(db):
+    """The interpreter's seed terms in this test's transaction (a transactional test before may have flushed
+    them), and an interpreter that reads them afresh."""
+    import importlib
+
+    from django.apps import apps
+
+    importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
+    _fresh_interpreter()

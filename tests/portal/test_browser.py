@@ -35,7 +35,7 @@ def test_viewer_has_no_control(login, viewer, fleet, live_url):
     )
     page.wait_for_function("() => window.__replies.some((m) => m.type === 'command.result')")
     reply = page.evaluate("() => window.__replies.find((m) => m.type === 'command.result')")
-    assert reply["ok"] is False and "may only view" in reply["detail"]
+    assert reply["ok"] is False and "may not stop" in reply["detail"]
 
 
 def test_second_operator_cannot_command_a_robot_held_by_the_first(

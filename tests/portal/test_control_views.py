@@ -20,7 +20,7 @@ def fake_control(monkeypatch):
     """Record what reaches execution.control instead of talking to robots; the checks are the real ones."""
     import importlib
 
-    import fleet
+    import execution
 
     real = importlib.import_module("execution.control")
     calls = []
@@ -39,7 +39,7 @@ def fake_control(monkeypatch):
             return v, w
 
     monkeypatch.setitem(__import__("sys").modules, "execution.control", Control)
-    monkeypatch.setattr(fleet, "control", Control, raising=False)
+    monkeypatch.setattr(execution, "control", Control, raising=False)
     return calls
 
 
@@ -76,9 +76,9 @@ def test_viewer_cannot_stop_or_teleop(client_for, viewer, fleet, fake_control):
     assert _post(client, reverse("stop"), {"robots": "all"}).status_code == 403
     reply = _post(client, reverse("robot-teleop", args=[fleet["turtlebot"].pk]), {"linear": 0.1})
     assert reply.status_code == 403
-    assert "may only view" in reply.json()["detail"]
+    assert "may not stop" in reply.json()["detail"]
     assert fake_control == []
-    assert AuditEntry.objects.filter(action="command.refused", user=viewer).count() == 2
+    assert AuditEntry.objects.filter(action="access.refused", user=viewer).count() == 2
 
 
 def test_stop_all_reaches_robots_held_by_someone_else(client, operator, second_operator, fleet, fake_control):

@@ -60,7 +60,7 @@ def test_broken_urdf_is_reported_not_fatal(endpoint):
     (robot,) = run(discover(endpoint(build=broken).url))
     assert robot.urdf is None
     assert "not XML" in robot.urdf_error
-    assert robot.name.startswith("127.0.0.1-")  # no URDF name: host-port
+    assert robot.name == ""  # no URDF name: registration names it after its model, never host:port
     assert "/cmd_vel" in robot.topics
 
 
@@ -79,6 +79,9 @@ def test_demo_world_endpoints(paper_world):
     assert [g.name for g in found["robots"]] == ["robot1", "robot2", "robot3", "robot4"]
     assert [g.name for g in found["tiago"]] == ["tiago"]
     assert found["tb3_nav2"][0].ros_version == 2
-    assert found["tb3_nav2"][0].actions == {"/navigate_to_pose": "nav2_msgs/action/NavigateToPose"}
+    assert found["tb3_nav2"][0].actions == {
+        "/navigate_to_pose": "nav2_msgs/action/NavigateToPose",
+        "/dock": "irobot_create_msgs/action/Dock",
+    }
     assert found["robots"][0].actions == {"/robot1/move_base": "move_base_msgs/MoveBaseAction"}
     assert found["husky"][0].start_pose == pytest.approx([1.5, -1.3, 1.5708], abs=1e-3)

@@ -146,6 +146,34 @@ def test_ros2_navigation_binds_the_navigate_to_pose_action_over_goal_pose():
     assert {c["target"] for c in navigate.candidates} == {"/navigate_to_pose", "/goal_pose"}
 
 
+def test_a_create3_dock_action_server_binds_the_dock_role_and_not_navigate():
+    graph = make_graph(
+        [("/dock_status", "irobot_create_msgs/msg/DockStatus", ["/motion_control"], [])],
+        actions={
+            "/navigate_to_pose": "nav2_msgs/action/NavigateToPose",
+            "/dock": "irobot_create_msgs/action/Dock",
+            "/undock": "irobot_create_msgs/action/Undock",
+        },
+    )
+    results = identify(graph)
+    dock = results["dock"]
+    assert (dock.target, dock.kind, dock.message_type, dock.how) == (
+        "/dock",
+        "action",
+        "irobot_create_msgs/action/Dock",
+        "exact",
+    )
+    assert [c["target"] for c in dock.candidates] == [
+        "/dock"
+    ]  # the status topic and Undock are not candidates
+    assert results["navigate"].target == "/navigate_to_pose"
+
+
+def test_a_robot_without_a_dock_leaves_the_dock_role_unbound_without_asking():
+    dock = identify(husky_ros1())["dock"]
+    assert (dock.target, dock.needs_user) == ("", False)
+
+
 @pytest.mark.parametrize("n", [1200])
 def test_identification_handles_a_big_graph(n):
     entries = [(f"/sensors/s{i}/value", "std_msgs/Float32", [f"/n{i % 50}"], []) for i in range(n)]

@@ -57,6 +57,14 @@ def test_ros2_and_legged_robots_register(paper_world):
     nav2, spot = Robot.objects.get(name="tb3_nav2"), Robot.objects.get(name="spot")
     assert (nav2.ros_version, bound(nav2, "navigate")) == (2, "/navigate_to_pose")
     assert nav2.bindings.get(action="navigate").kind == Binding.Kind.ACTION
+    dock = nav2.bindings.get(action="dock")
+    assert (dock.target, dock.kind, dock.message_type, dock.needs_user) == (
+        "/dock",
+        Binding.Kind.ACTION,
+        "irobot_create_msgs/action/Dock",
+        False,
+    )
+    assert spot.bindings.get(action="dock").target == ""  # no dock station: nothing to bind, nothing to ask
     assert (spot.drive, spot.leg_count, spot.wheel_count) == ("legged", 4, 0)
     assert bound(spot, "move") == "/spot/cmd_vel"
 
@@ -125,7 +133,7 @@ def test_same_urdf_name_on_two_endpoints_gets_distinct_robot_names(endpoint):
     first, second = endpoint(), endpoint()
     register_endpoints([first.url, second.url])
     names = sorted(Robot.objects.values_list("name", flat=True))
-    assert names == sorted(["fakebot", f"fakebot-127.0.0.1-{second.port}"])
+    assert names == ["fakebot", "fakebot_2"]  # never host:port in a name people type
 
 
 def test_register_command_json_shape(endpoint):

@@ -117,7 +117,7 @@ def test_nav2_cancel_action_goal_cancels(fast_world, bridge):
 
 def test_nav2_action_servers_are_listed_without_hidden_topics(fast_world, bridge):
     tb3 = bridge(fast_world.urls["tb3_nav2"])
-    assert tb3.call("/rosapi/action_servers")["values"]["action_servers"] == ["/navigate_to_pose"]
+    assert tb3.call("/rosapi/action_servers")["values"]["action_servers"] == ["/dock", "/navigate_to_pose"]
     topics = tb3.call("/rosapi/topics")["values"]["topics"]
     assert not [t for t in topics if "/_action/" in t]
     husky = bridge(fast_world.urls["husky"])

@@ -72,3 +72,54 @@ def test_bad_world_files_are_refused(tmp_path):
         load_world(tmp_path)
     with pytest.raises(WorldFormatError, match="cannot read"):
         load_world(tmp_path / "missing.yaml")
+
+
+def test_tb3_nav2_has_a_dock_on_a_free_cell_behind_its_start(world):
+    tb3 = next(r for r in world.robots if r.name == "tb3_nav2")
+    assert tb3.dock == pytest.approx((-1.0, -5.1, -1.5708)) and tb3.home == tb3.dock
+    assert math.dist((tb3.x, tb3.y), tb3.dock[:2]) == pytest.approx(0.6)
+    assert world.map.is_free(*tb3.dock[:2])
+    husky = next(r for r in world.robots if r.name == "husky")
+    assert husky.dock is None and husky.home == (husky.x, husky.y, husky.yaw)  # no station: home is its start
+
+
+def test_extra_robots_keep_clear_of_docks(world):
+    fresh = load_world("paper")
+    dock = next(r for r in fresh.robots if r.name == "tb3_nav2").dock
+    assert min(math.dist((r.x, r.y), dock[:2]) for r in fresh.add_extra_robots(50)) > 1.0
+
+
+def _world_with_robot(tmp_path, robot: str):
+    """A world file on the paper map holding one nav2 robot written as the given YAML flow mapping."""
+    from fleetcore.world import WORLDS_DIR
+
+    (tmp_path / "world.yaml").write_text(
+        f"map: {WORLDS_DIR / 'paper' / 'map.yaml'}\n"
+        "endpoints: [{key: ep, port_offset: 0, ros_version: 2}]\n"
+        f"robots:\n  - {robot}\n"
+    )
+    return tmp_path
+
+
+def test_a_dock_key_left_out_takes_the_start_value(tmp_path):
+    robot = "{name: r, model: turtlebot3_burger, endpoint: ep, x: 1.0, y: -1.0, yaw: 0.5, stack: nav2, dock: {y: -1.5}}"
+    (spec,) = load_world(_world_with_robot(tmp_path, robot)).robots
+    assert spec.dock == (1.0, -1.5, 0.5)
+
+
+@pytest.mark.parametrize(
+    ("dock", "stack", "error"),
+    [
+        ("[1, 2]", "nav2", "dock must be a mapping"),
+        ("{x: 1, y: -1, z: 0}", "nav2", "unknown keys \\['z'\\]"),
+        ("{x: one, y: -1}", "nav2", "must be numbers"),
+        ("{x: 6.2, y: 0.0}", "nav2", "dock on a cell that is not free"),
+        ("{x: 1.0, y: -1.5}", "move_base", "needs a ROS 2 robot with stack nav2"),
+    ],
+)
+def test_bad_docks_are_refused_naming_the_robot(tmp_path, dock, stack, error):
+    robot = (
+        f"{{name: r, model: turtlebot3_burger, endpoint: ep, x: 1.0, y: -1.0, stack: {stack}, dock: {dock}}}"
+    )
+    with pytest.raises(WorldFormatError, match=f"robot 'r'.*{error}"):
+        load_world(_world_with_robot(tmp_path, robot))
