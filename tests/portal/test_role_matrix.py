@@ -198,6 +198,7 @@ def _api_url(path: str, world) -> str:
         "instruction_id": 1,
         "name": world["robot"].name,
         "action": "odometry",
+        "alert_id": 1,
     }
     return re.sub(r"{(\w+)}", lambda m: str(values[m.group(1)]), path)
 
