@@ -132,3 +132,29 @@ def env_str(name: str, default: str | None = None, min_length: int = 0) -> str |
     if len(raw) < min_length:
         raise ImproperlyConfigured(f"{name}: must be at least {min_length} characters long")
     return raw
+
+
+def env_int(name: str, default: int, minimum: int = 0) -> int:
+    """Read a whole number of at least `minimum`."""
+    raw = os.environ.get(name)
+    if raw is None or raw.strip() == "":
+        return default
+    try:
+        value = int(raw.strip())
+    except ValueError:
+        raise ImproperlyConfigured(f"{name}: expected a whole number, got {raw!r}") from None
+    if value < minimum:
+        raise ImproperlyConfigured(f"{name}: must be at least {minimum}, got {value}")
+    return value
+
+
+def env_networks(name: str, default: list[str]) -> list[str]:
+    """Read a comma-separated allow-list of networks (CIDRs), addresses and host names."""
+    from robots.endpoints import AllowList
+
+    entries = env_list(name, default)
+    try:
+        AllowList.parse(entries)
+    except ValueError as exc:
+        raise ImproperlyConfigured(f"{name}: {exc}") from None
+    return entries

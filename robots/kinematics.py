@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 
-from robots.discovery import Graph, decode_param
+from robots.discovery import Graph, decode_param, finite
 
 # (model, ros_version or 0 for any) -> (max_linear m/s, max_angular rad/s, source in robot_profiles.yaml)
 LIMITS = {
@@ -66,6 +66,6 @@ def _param(graph: Graph, pattern: re.Pattern) -> tuple[str, float] | None:
     for name, text in graph.params.items():
         if pattern.search(name):
             value = decode_param(text)
-            if isinstance(value, int | float) and not isinstance(value, bool) and value > 0:
+            if finite(value) and value > 0:  # a robot's NaN, Infinity or 1e400 is no limit
                 return name, float(value)
     return None

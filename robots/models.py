@@ -1,5 +1,6 @@
 """Registered robots and the ROS graph discovered behind each rosbridge endpoint."""
 
+from django.core.exceptions import ValidationError
 from django.db import models
 from django.utils import timezone
 
@@ -172,6 +173,17 @@ class Binding(models.Model):
 
     def __str__(self):
         return f"{self.robot}.{self.action} -> {self.target or '?'}"
+
+    def clean(self):
+        """A target must be one of the robot's names, of a type the action accepts (the admin's forms ask this)."""
+        if not self.target or self.robot_id is None:
+            return
+        from robots.binding import BindingRefused, resolve_target
+
+        try:
+            self.kind, self.message_type = resolve_target(self.robot, self.action, self.target)
+        except BindingRefused as exc:
+            raise ValidationError({"target": exc.message}) from None
 
 
 class RegistrationRecord(models.Model):
