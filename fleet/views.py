@@ -90,6 +90,9 @@ def robot_list(request):
     return render(request, "fleet/robot_list.html", {"robots": live.robot_rows(Robot.objects.all())})
 
 
+GRAPH_PAGE = 100  # topics, nodes or services per page of a robot's page
+
+
 def robot_detail(request, pk: int):
     """One robot: bindings and how each was found, its ROS graph, URDF facts, history, teleop and lease."""
     robot = _get_robot_for_user(request, pk)
@@ -98,9 +101,10 @@ def robot_detail(request, pk: int):
         "robot": robot,
         "row": row,
         "bindings": robot.bindings.all(),
-        "topics": robot.topics.all(),
-        "nodes": robot.nodes.all(),
-        "services": robot.services.all(),
+        # a robot may list 100,000 topics: the page shows one page of each list, never all of it
+        "topics": Paginator(robot.topics.all(), GRAPH_PAGE).get_page(request.GET.get("topics")),
+        "nodes": Paginator(robot.nodes.all(), GRAPH_PAGE).get_page(request.GET.get("nodes")),
+        "services": Paginator(robot.services.all(), GRAPH_PAGE).get_page(request.GET.get("services")),
         "facts": sorted((robot.description or {}).items()),
         "transitions": robot.transitions.select_related("instruction")[:30],
         "holds_it": row["holder"] == request.user.username,

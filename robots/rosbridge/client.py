@@ -103,7 +103,7 @@ class RosbridgeClient:
         self.min_backoff, self.max_backoff = min_backoff, max_backoff
         self.last_error = ""
         self.answered = (
-            False  # a well-formed service_response arrived: something that speaks rosbridge is there
+            False  # a rosbridge op arrived (even a bad one): something speaking rosbridge is there
         )
         self._ws: ClientConnection | None = None
         self._ids = codec.Ids()
@@ -165,10 +165,13 @@ class RosbridgeClient:
     async def close(self) -> None:
         """Close for good: stop reconnecting, fail whatever waits."""
         self._closing = True
+        ws, self._ws = (
+            self._ws,
+            None,
+        )  # taken first: cancelling the supervisor cancels the reader, which forgets it
         if self._supervisor is not None:
             self._supervisor.cancel()
             await _ended(self._supervisor)
-        ws, self._ws = self._ws, None
         if ws is not None:
             await ws.close()
         if self._reader is not None:
@@ -290,6 +293,7 @@ class RosbridgeClient:
         handler = self._handlers.get(message["op"])
         if handler is None:
             return
+        self.answered = True
         try:
             handler(codec.check(message))
         except BadFrame as exc:
@@ -313,7 +317,6 @@ class RosbridgeClient:
                 log.exception("%s: callback for %s failed", self.url, sub.topic)
 
     def _on_service_response(self, message: dict) -> None:
-        self.answered = True
         fut = self._calls.get(message["id"])
         if fut is None or fut.done():
             return
