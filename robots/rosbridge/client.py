@@ -372,12 +372,18 @@ class RosbridgeClient:
         fut = asyncio.get_running_loop().create_future()
         self._calls[message["id"]] = fut
         limit = self.call_timeout if timeout is None else timeout
+        dropped = self._dropped
         try:
             await self._send(message)
             return await asyncio.wait_for(fut, limit)
         except TimeoutError as exc:
             if isinstance(exc, RosbridgeError):
                 raise
+            if self._dropped > dropped:  # it did answer, with frames we could not use (logged)
+                raise RosbridgeTimeout(
+                    f"{self.url}: only bad frames within {limit:g} s of calling {name} "
+                    f"({self._dropped - dropped} dropped)"
+                ) from None
             raise RosbridgeTimeout(f"{self.url}: no answer to {name} within {limit:g} s") from None
         finally:
             self._calls.pop(message["id"], None)

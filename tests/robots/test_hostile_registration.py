@@ -50,7 +50,7 @@ def test_a_batch_of_hostile_endpoints_registers_the_good_one_and_refuses_each_ot
     assert error["nodes"].endswith(
         "/rosapi/nodes answered 'nodes' = '5', not a list of names (text up to 255 characters)"
     )
-    assert "no answer to /rosapi/node_details" in error["id"]
+    assert "only bad frames within 0.5 s of calling /rosapi/node_details (1 dropped)" in error["id"]
     assert "answered a bad frame (fragment with 'total' = 'abc')" in error["fragment"]
     assert "/robot_description is 1.5 MB, more than the 1 MB limit (FLEET_ROBOT_MAX_URDF_MB)" in error["urdf"]
     assert "larger than the 2 MB limit (FLEET_ROBOT_MAX_FRAME_MB)" in error["frame"]
