@@ -133,9 +133,13 @@ def choose_binding(request, pk: int):
     if target not in {candidate.get("target") for candidate in binding.candidates}:
         messages.error(request, f"target: {target!r} is not one of the candidates for {binding}.")
         return redirect("registration")
-    from robots.binding import choose
+    from robots.binding import BindingRefused, choose
 
-    chosen = choose(binding.robot, binding.action, target, request.user)
+    try:
+        chosen = choose(binding.robot, binding.action, target, request.user)
+    except BindingRefused as exc:  # a candidate of a type the action cannot use
+        messages.error(request, str(exc))
+        return redirect("registration")
     messages.success(request, f"{chosen.robot.name}: {chosen.action} now uses {chosen.target}.")
     return redirect("registration")
 

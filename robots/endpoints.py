@@ -114,6 +114,11 @@ async def resolve(url: str, allowed: AllowList, timeout: float = 2.0) -> str:
     return parsed.url(None if parsed.scheme == "wss" else str(addresses[0]))
 
 
+def check(url: str, allowed: AllowList, timeout: float = 2.0) -> str:
+    """resolve() for synchronous callers (a model's clean(), a form)."""
+    return asyncio.run(resolve(url, allowed, timeout))
+
+
 async def _addresses(parsed: Parsed, timeout: float) -> list[Address]:
     """The host's addresses, IPv4 first (the order a ws:// endpoint is stored by)."""
     loop = asyncio.get_running_loop()

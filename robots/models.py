@@ -65,6 +65,17 @@ class Robot(models.Model):
     def __str__(self):
         return self.name
 
+    def clean(self):
+        """An endpoint typed in the admin is checked as registration checks it, and stored by its address."""
+        from robots import endpoints
+        from robots.registration import allow_list
+        from robots.rosbridge import RosbridgeError
+
+        try:
+            self.endpoint = endpoints.check(self.endpoint, allow_list())
+        except RosbridgeError as exc:
+            raise ValidationError({"endpoint": str(exc)}) from None
+
     def topic_name(self, relative: str) -> str:
         """Resolve a robot-relative topic name under this robot's namespace."""
         return f"{self.namespace.rstrip('/')}/{relative.lstrip('/')}"

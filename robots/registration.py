@@ -200,8 +200,12 @@ def finish(result: EndpointResult, record: RegistrationRecord | None, user=None)
     record.finished_at = timezone.now()
     record.save()
     result.record_id = record.pk
-    stage = "done" if result.ok else "failed"
-    live.registration(record.endpoint, stage, result.error, result.robots, ok=result.ok)
+    try:  # stored first: a push that fails (Redis away) loses nothing
+        live.registration(
+            record.endpoint, "done" if result.ok else "failed", result.error, result.robots, ok=result.ok
+        )
+    except Exception:
+        log.warning("%s: could not push the registration's outcome", record.endpoint, exc_info=True)
     audit.record(user, "register", record.endpoint, ok=result.ok, robots=result.robots, error=result.error)
     return result
 

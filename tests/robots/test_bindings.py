@@ -2,6 +2,7 @@
 
 import pytest
 from django.core.exceptions import ValidationError
+from django.urls import reverse
 
 from robots.discovery import Graph, TopicInfo
 from robots.identify import accepts, identify
@@ -82,3 +83,30 @@ def test_navigate_binds_only_an_action_server_whose_goals_we_can_send():
 )
 def test_what_each_action_accepts(action, kind, type_, ok):
     assert accepts(action, kind, type_) is ok
+
+
+def test_the_registration_page_refuses_a_stale_candidate_of_the_wrong_type_with_a_message(
+    fakebot, client_for, fleet_admin
+):
+    move = fakebot.bindings.get(action="move")
+    move.candidates = [{"target": "/odom", "type": "nav_msgs/Odometry"}]  # stored before types were checked
+    move.save()
+    page = client_for(fleet_admin).post(
+        reverse("choose-binding", args=[move.pk]), {"target": "/odom"}, follow=True
+    )
+    assert page.status_code == 200
+    assert "move takes a geometry_msgs/Twist or geometry_msgs/TwistStamped topic" in page.content.decode()
+    assert fakebot.bindings.get(action="move").target == "/cmd_vel"
+
+
+def test_an_endpoint_typed_in_the_admin_is_checked_and_stored_by_address(settings):
+    robot = Robot(name="typed", endpoint="ws://localhost:9090/")
+    robot.clean()
+    assert robot.endpoint == "ws://127.0.0.1:9090"
+    robot.endpoint = "ws://127.0.0.1:99999"
+    with pytest.raises(ValidationError, match="the port must be 1-65535"):
+        robot.clean()
+    settings.FLEET_ROBOT_ALLOWED_NETWORKS = ["10.0.0.0/8"]
+    robot.endpoint = "ws://127.0.0.1:9090"
+    with pytest.raises(ValidationError, match="outside the allowed robot networks"):
+        robot.clean()
