@@ -104,9 +104,9 @@ async def rosapi(client: RosbridgeClient, service: str, args: dict | None = None
     reply = await client.call_service(service, args)
     caps = limits.current()
     for key, valid in REPLIES[service].items():
-        value = reply.get(key)
         if key not in reply:
             continue
+        value = reply[key]
         if not valid(value):
             raise BadReply(
                 f"{client.url}: {service} answered {key!r} = {preview(value)}, not {EXPECTED[valid]}"
@@ -194,8 +194,6 @@ async def read_graph(client: RosbridgeClient, url: str, sem: asyncio.Semaphore) 
     """Read topics, nodes with details, services with types, actions and param names."""
     try:
         topics = await rosapi(client, "/rosapi/topics")
-    except BadReply:
-        raise
     except ServiceError as exc:
         raise RosbridgeError(f"{url}: rosapi does not answer /rosapi/topics ({exc})") from None
     except RosbridgeError as exc:

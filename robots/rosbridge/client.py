@@ -37,9 +37,8 @@ log = logging.getLogger("robots.rosbridge")
 STABLE = 2.0  # s: a connection that lasted less is a flap, and the next attempt waits out the backoff
 LOGGED_DROPS = 10  # bad frames logged one by one per client; after that one line per thousand
 CLOSE_NOT_ROSBRIDGE = 1003  # WebSocket close code "unsupported data"
-MAX_QUEUE = (
-    16  # frames read ahead of the reader: bounds memory at MAX_QUEUE x the frame limit (websockets' default)
-)
+# Frames read ahead of the reader (websockets' default): memory is bounded by MAX_QUEUE x the frame limit.
+MAX_QUEUE = 16
 
 
 @dataclass(eq=False)
@@ -102,9 +101,8 @@ class RosbridgeClient:
         self.reconnect, self.ping_interval = reconnect, ping_interval
         self.min_backoff, self.max_backoff = min_backoff, max_backoff
         self.last_error = ""
-        self.answered = (
-            False  # a rosbridge op arrived (even a bad one): something speaking rosbridge is there
-        )
+        # True once a rosbridge op arrived (even a bad one): something that speaks rosbridge is there
+        self.answered = False
         self._ws: ClientConnection | None = None
         self._ids = codec.Ids()
         self._calls: dict[str, asyncio.Future] = {}
@@ -165,10 +163,8 @@ class RosbridgeClient:
     async def close(self) -> None:
         """Close for good: stop reconnecting, fail whatever waits."""
         self._closing = True
-        ws, self._ws = (
-            self._ws,
-            None,
-        )  # taken first: cancelling the supervisor cancels the reader, which forgets it
+        # Taken first: cancelling the supervisor cancels the reader, which forgets the socket it read.
+        ws, self._ws = self._ws, None
         if self._supervisor is not None:
             self._supervisor.cancel()
             await _ended(self._supervisor)
@@ -299,7 +295,7 @@ class RosbridgeClient:
         except BadFrame as exc:
             self._drop(message, exc)
 
-    def _drop(self, message: dict, exc: BadFrame) -> None:
+    def _drop(self, message: dict, exc: RosbridgeError) -> None:
         """Log a bad frame (the first few, then one line per thousand) and fail the call it answers, if any."""
         self._dropped += 1
         if self._dropped <= LOGGED_DROPS or self._dropped % 1000 == 0:
