@@ -167,3 +167,15 @@ def env_str(name: str, default: str | None = None, min_length: int = 0) -> str |
     if len(raw) < min_length:
         raise ImproperlyConfigured(f"{name}: must be at least {min_length} characters long")
     return raw
+
+
+def env_networks(name: str, default: list[str]) -> list[str]:
+    """Read a comma-separated allow-list of networks (CIDRs), addresses and host names."""
+    from robots.endpoints import AllowList
+
+    entries = env_list(name, default)
+    try:
+        AllowList.parse(entries)
+    except ValueError as exc:
+        raise ImproperlyConfigured(f"{name}: {exc}") from None
+    return entries

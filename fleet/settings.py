@@ -14,6 +14,7 @@ from fleet.env import (
     env_database,
     env_int,
     env_list,
+    env_networks,
     env_redis_url,
     env_secret_key,
     env_str,
@@ -201,3 +202,16 @@ FLEET_IDLE_TIMEOUT_SECONDS = 600
 FLEET_EXECUTE = os.environ.get("FLEET_EXECUTE", "celery")
 FLEET_EXECUTE_QUEUE = os.environ.get("FLEET_EXECUTE_QUEUE", "")
 FLEET_EXEC_KEY_PREFIX = os.environ.get("FLEET_EXEC_KEY_PREFIX", "fleet:exec")
+
+# ----- Robots are untrusted input (issue 15; robots/limits.py, robots/endpoints.py) -----
+# Caps on what one rosbridge endpoint may send: a WebSocket frame (and a reassembled fragmented message), the
+# names one rosapi list may hold (topics, nodes, services, params), and one robot_description. Each refusal names
+# its variable. Registration connects only to hosts in FLEET_ROBOT_ALLOWED_NETWORKS (CIDRs, addresses or host
+# names; default loopback and the private ranges).
+FLEET_ROBOT_MAX_FRAME_MB = env_int("FLEET_ROBOT_MAX_FRAME_MB", 16, minimum=1)
+FLEET_ROBOT_MAX_TOPICS = env_int("FLEET_ROBOT_MAX_TOPICS", 100_000, minimum=1)
+FLEET_ROBOT_MAX_URDF_MB = env_int("FLEET_ROBOT_MAX_URDF_MB", 4, minimum=1)
+FLEET_ROBOT_ALLOWED_NETWORKS = env_networks(
+    "FLEET_ROBOT_ALLOWED_NETWORKS",
+    ["127.0.0.0/8", "::1/128", "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "fc00::/7"],
+)

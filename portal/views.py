@@ -98,6 +98,9 @@ def robot_list(request):
     return render(request, "fleet/robot_list.html", {"robots": snapshots.robot_rows(Robot.objects.all())})
 
 
+GRAPH_PAGE = 100  # topics, nodes or services per page of a robot's page
+
+
 @requires("view")
 def robot_detail(request, pk: int):
     """One robot: bindings and how each was found, its ROS graph, URDF facts, history, teleop and lease."""
@@ -107,9 +110,10 @@ def robot_detail(request, pk: int):
         "robot": robot,
         "row": row,
         "bindings": robot.bindings.all(),
-        "topics": robot.topics.all(),
-        "nodes": robot.nodes.all(),
-        "services": robot.services.all(),
+        # a robot may list 100,000 topics: the page shows one page of each list, never all of it
+        "topics": Paginator(robot.topics.all(), GRAPH_PAGE).get_page(request.GET.get("topics")),
+        "nodes": Paginator(robot.nodes.all(), GRAPH_PAGE).get_page(request.GET.get("nodes")),
+        "services": Paginator(robot.services.all(), GRAPH_PAGE).get_page(request.GET.get("services")),
         "facts": sorted((robot.description or {}).items()),
         "transitions": robot.transitions.select_related("instruction")[:30],
         "holds_it": row["holder"] == request.user.username,
@@ -137,9 +141,13 @@ def choose_binding(request, pk: int):
     if target not in {candidate.get("target") for candidate in binding.candidates}:
         messages.error(request, f"target: {target!r} is not one of the candidates for {binding}.")
         return redirect("registration")
-    from robots.binding import choose
+    from robots.binding import BindingRefused, choose
 
-    chosen = choose(binding.robot, binding.action, target, request.user)
+    try:
+        chosen = choose(binding.robot, binding.action, target, request.user)
+    except BindingRefused as exc:  # a candidate of a type the action cannot use
+        messages.error(request, str(exc))
+        return redirect("registration")
     messages.success(request, f"{chosen.robot.name}: {chosen.action} now uses {chosen.target}.")
     return redirect("registration")
 

@@ -5,6 +5,13 @@ so a restarted endpoint is back within about 2 s and every subscription made on 
 client itself. A change of link state is written to the endpoint's robots (link_status, last_seen) and pushed
 through live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT seconds.
 
+A link survives anything one endpoint sends (robots.rosbridge.client): a frame with wrong fields is dropped
+and logged, a frame that is not rosbridge or larger than the frame limit closes the connection and the link
+reconnects, and an error in a hook, a callback or the reader is logged, never raised through the supervisor.
+A robot that drops while moving: its executor learns "link lost" at its next command, where
+fleet/execution/link.py RobotLink.velocity() publishes through the process's SyncClient and gets LinkDown
+("…: not connected"), or, between commands, when next_pose() waits past the step's odometry timeout.
+
 Extending: pass `hooks` to LinkManager; each hook is `async hook(client, robots)` and runs once when a link is
 created (robots: [{id, name, namespace, bindings: {action: (target, type)}}]). Subscriptions a hook makes
 survive reconnections (e.g. the pose stream subscribes each robot's odometry binding here).
@@ -101,12 +108,10 @@ class LinkManager:
         writer = asyncio.create_task(self._write_changes())
         try:
             while not self.stopping.is_set():
-                wanted = self.fixed if self.fixed is not None else await sync_to_async(registered_endpoints)()
-                for url in wanted:
-                    if url not in self.links:
-                        await self.add(url)
-                online = [u for u, c in self.links.items() if c.is_connected]
-                await sync_to_async(touch)(online)
+                try:
+                    await self._tick()
+                except Exception:  # the database away, say: log it and look again next time
+                    log.exception("links: one round of looking after the endpoints failed")
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self.stopping.wait(), min(REFRESH, HEARTBEAT))
         finally:
@@ -115,14 +120,26 @@ class LinkManager:
             await self.changes.join()
             writer.cancel()
 
+    async def _tick(self) -> None:
+        """Add links for new endpoints (each on its own: one that fails does not stop the rest), touch the online."""
+        wanted = self.fixed if self.fixed is not None else await sync_to_async(registered_endpoints)()
+        for url in wanted:
+            if url not in self.links:
+                try:
+                    await self.add(url)
+                except Exception:
+                    log.exception("%s: could not start its link", url)
+        online = [u for u, c in self.links.items() if c.is_connected]
+        await sync_to_async(touch)(online)
+
     async def add(self, url: str) -> RosbridgeClient:
-        """Open a link to url and run the hooks on it."""
+        """Open a link to url and run the hooks on it (robots read first: if that fails, the next round retries)."""
+        robots = await sync_to_async(endpoint_robots)(url) if self.hooks else []
         client = RosbridgeClient(url, reconnect=True, ping_interval=1.0, max_backoff=1.6)
         client.on_link(lambda up, reason, url=url: self._changed(url, up, reason))
         self.links[url] = client
         await client.start()
         if self.hooks:
-            robots = await sync_to_async(endpoint_robots)(url)
             for hook in self.hooks:
                 try:
                     await hook(client, robots)
