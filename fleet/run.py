@@ -173,7 +173,8 @@ def prepare(env: dict[str, str], stopping: threading.Event) -> str | None:
 
 
 def stop_on_signals(supervisord: subprocess.Popen) -> threading.Event:
-    """Ctrl-C, SIGTERM or a closed terminal: supervisord stops every process (Redis last) and then itself."""
+    """Ctrl-C, SIGTERM or a closed terminal: we tell supervisord, which stops every process (Redis last) and then
+    itself."""
     stopping = threading.Event()
 
     def _stop(*_args):

@@ -130,11 +130,14 @@ def program_section(program: Program, layout: Layout, directory: Path) -> list[s
 
 
 def start_supervisord(layout: Layout, env: dict[str, str]) -> subprocess.Popen:
-    """supervisord in the foreground, as our child; on Linux it is told to stop everything if we are killed."""
+    """supervisord in the foreground, as our child, in a process group of its own: the terminal's signals (a
+    Ctrl-C, a hang-up, which supervisord would take as "reload") reach only us, and we tell it to stop. On Linux
+    it is also told to stop if we are killed."""
     return subprocess.Popen(
         [sys.executable, "-m", "supervisor.supervisord", "-c", str(layout.config)],
         env=env,
         stdout=subprocess.DEVNULL,
+        process_group=0,
         preexec_fn=_stop_with_parent if sys.platform == "linux" else None,
     )
 
