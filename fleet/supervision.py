@@ -154,12 +154,14 @@ def rpc(layout: Layout) -> xmlrpc.client.ServerProxy:
 
 
 def wait_for_rpc(layout: Layout, supervisord: subprocess.Popen, timeout: float = 20.0):
-    """The RPC proxy once supervisord answers on it; None if supervisord ended or did not answer in time."""
+    """The RPC proxy once our supervisord answers on it; None if it ended (e.g. another one holds the socket: a
+    second `make run` in the same var/ folder) or did not answer in time."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and supervisord.poll() is None:
         proxy = rpc(layout)  # a fresh connection each time: a failed one is not reused
         try:
-            if proxy.supervisor.getState()["statename"] == "RUNNING":
+            ours = proxy.supervisor.getPID() == supervisord.pid
+            if ours and proxy.supervisor.getState()["statename"] == "RUNNING":
                 return proxy
         except (OSError, http.client.HTTPException, xmlrpc.client.Fault):
             pass  # not listening yet
