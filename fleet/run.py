@@ -204,7 +204,8 @@ def foreground_terminal() -> Iterator[None]:
 
     make answers SIGINT by killing itself with it once its child has ended, whatever the child's status: `make
     run` would end with status 130 however cleanly everything stopped. With our own foreground group, make never
-    sees the Ctrl-C and exits with ours. Without a terminal (a test, CI) nothing changes.
+    sees the Ctrl-C and exits with ours. Ctrl-Z is ignored meanwhile: it would stop us alone, with make still in
+    the shell's foreground, and leave the terminal hanging. Without a terminal (a test, CI) nothing changes.
     """
     fd = sys.stdin.fileno() if sys.stdin and sys.stdin.isatty() else None
     if fd is None or os.tcgetpgrp(fd) != os.getpgrp():
@@ -213,9 +214,11 @@ def foreground_terminal() -> Iterator[None]:
     previous = os.getpgrp()
     os.setpgid(0, 0)
     _set_foreground(fd, os.getpgrp())
+    suspend = signal.signal(signal.SIGTSTP, signal.SIG_IGN)
     try:
         yield
     finally:
+        signal.signal(signal.SIGTSTP, suspend)
         _set_foreground(fd, previous)
 
 
