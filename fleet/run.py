@@ -103,48 +103,50 @@ def main() -> int:
 
 
 def run(setup: Setup) -> int:
-    """Start the supervisor, prepare the database, start the rest; return once the supervisor has stopped."""
+    """Start the supervisor, bring the system up under it; return once the supervisor has stopped."""
     layout = Layout(setup.var_dir)
     listed = programs(setup)
     layout.log_dir.mkdir(parents=True, exist_ok=True)
     layout.config.write_text(render_config(listed, layout, BASE_DIR))
-    relay = LogRelay(
-        layout, [program.name for program in listed]
-    )  # from here on: what was there is not repeated
-    env = setup.env()
-    supervisord = start_supervisord(layout, env)
+    # made before anything runs: what the logs held already is not repeated
+    relay = LogRelay(layout, [program.name for program in listed])
+    supervisord = start_supervisord(layout, setup.env())
     stopping = stop_on_signals(supervisord)
     relay.start()
     try:
-        proxy = wait_for_rpc(layout, supervisord)
-        if proxy is None:
-            print(f"make run: the supervisor did not start (is another `make run` using {setup.var_dir}?)")
-            return supervisord.poll() or 1
-        if setup.redis_url is None and not wait_for_redis(setup.redis_socket, supervisord):
-            print(
-                f"make run: the embedded Redis did not answer on {setup.redis_socket}: see the redis lines above"
-            )
-            return 0 if stopping.is_set() else 1
-        login = prepare(env, stopping)
-        if login is None:
-            return 0 if stopping.is_set() else 1
-        proxy.supervisor.startAllProcesses(False)
-        print(f"\n  Fleet portal: {setup.url}  (starting; Ctrl-C stops everything)\n", flush=True)
-        threading.Thread(
-            target=lambda: print(announcement(setup.url, login), flush=True), daemon=True
-        ).start()
-        code = supervisord.wait()
-        return 0 if stopping.is_set() else code or 1
+        return bring_up(setup, layout, supervisord, stopping)
     finally:
         stop(supervisord)
         relay.stop()
 
 
+def bring_up(setup: Setup, layout: Layout, supervisord: subprocess.Popen, stopping: threading.Event) -> int:
+    """Wait for the supervisor (and the embedded Redis), prepare the database, start the rest, say where to go;
+    then wait for the supervisor to end. 0 when we were asked to stop."""
+    proxy = wait_for_rpc(layout, supervisord)
+    if proxy is None:
+        print(f"make run: the supervisor did not start (is another `make run` using {setup.var_dir}?)")
+        return supervisord.poll() or 1
+    if setup.redis_url is None and not wait_for_redis(setup.redis_socket, supervisord):
+        print(f"make run: the embedded Redis did not answer on {setup.redis_socket}: see its lines above")
+        return 0 if stopping.is_set() else 1
+    login = prepare(setup.env(), stopping)
+    if login is None:
+        return 0 if stopping.is_set() else 1
+    proxy.supervisor.startAllProcesses(False)
+    print(f"\n  Fleet portal: {setup.url}  (starting; Ctrl-C stops everything)\n", flush=True)
+    threading.Thread(target=say_when_ready, args=(setup.url, login), name="announcement", daemon=True).start()
+    code = supervisord.wait()
+    return 0 if stopping.is_set() else code or 1
+
+
 def wait_for_redis(socket_path: Path, supervisord: subprocess.Popen, timeout: float = 30.0) -> bool:
     """Whether the embedded Redis answers a PING within timeout (it replays its append-only file first)."""
     import redis
+    from redis.backoff import NoBackoff
+    from redis.retry import Retry
 
-    client = redis.Redis(unix_socket_path=str(socket_path), socket_timeout=1)
+    client = redis.Redis(unix_socket_path=str(socket_path), socket_timeout=1, retry=Retry(NoBackoff(), 0))
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and supervisord.poll() is None:
         try:
@@ -231,6 +233,10 @@ def _set_foreground(fd: int, group: int) -> None:
         pass  # the terminal went away
     finally:
         signal.signal(signal.SIGTTOU, previous)
+
+
+def say_when_ready(url: str, login: str) -> None:
+    print(announcement(url, login), flush=True)
 
 
 def announcement(url: str, login: str, timeout: float = 60.0) -> str:

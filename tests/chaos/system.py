@@ -23,6 +23,8 @@ import xmlrpc.client
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import psutil
+
 from fleet.supervision import Layout, rpc
 
 BASE_DIR = Path(__file__).resolve().parents[2]
@@ -156,9 +158,10 @@ class RunningSystem:
             return False
 
     def kill(self, name: str) -> int:
-        """kill -9 one process; its pid."""
+        """kill -9 one process, and wait until it has ended (no longer answers, holds no port); its pid."""
         pid = self.processes()[name].pid
         os.kill(pid, signal.SIGKILL)
+        self.wait_until(lambda: not alive(pid), 5.0, f"{name} (pid {pid}) ended after SIGKILL")
         return pid
 
     def back(self, name: str, old_pid: int) -> bool:
@@ -188,6 +191,20 @@ class RunningSystem:
             assert answer.code == 302, f"login answered {answer.code}"
         return opener
 
+    def times_until(self, conditions: dict, timeout: float) -> list[float]:
+        """Seconds from now until each condition (named by what it waits for) first held, checked together."""
+        start, times = time.monotonic(), {}
+        while len(times) < len(conditions) and time.monotonic() - start < timeout:
+            for what, condition in conditions.items():
+                if what not in times and condition():
+                    times[what] = time.monotonic() - start
+            time.sleep(0.05)
+        missing = [what for what in conditions if what not in times]
+        assert not missing, (
+            f"not within {timeout:g} s: {', '.join(missing)}\n--- make run ---\n{self.text()[-4000:]}"
+        )
+        return [times[what] for what in conditions]
+
     def wait_until(self, condition, timeout: float, what: str) -> float:
         """Seconds until condition() held; AssertionError (with make's last output) if it did not in time."""
         start = time.monotonic()
@@ -200,6 +217,14 @@ class RunningSystem:
         raise AssertionError(
             f"not within {timeout:g} s: {what}\n--- make run said ---\n{self.text()[-4000:]}"
         )
+
+
+def alive(pid: int) -> bool:
+    """Whether the process runs (a zombie has ended: only its exit status is left to collect)."""
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
 
 
 class _NoRedirect(urllib.request.HTTPRedirectHandler):
