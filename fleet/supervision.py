@@ -1,6 +1,6 @@
 """`make run`'s supervisor: supervisord runs every process and starts again any that dies.
 
-supervisord (the `supervisor` package) restarts a process that dies after it was up at once, and one that dies
+supervisord (the `supervisor` package) restarts at once a process that dies after it was up, and one that dies
 within START_SECONDS of its start after one more second each time (1 s, 2 s, 3 s, ...), START_RETRIES times in a
 row before it gives up; each death is one line of its log. Every process writes to var/log/<name>.log, and
 LogRelay prints those lines to the terminal with the process's name in front, as one merged stream.
@@ -38,17 +38,11 @@ class Program:
 
     name: str
     command: list[str]
-    autostart: bool = (
-        False  # run.py starts the rest once the database is migrated; Redis starts with the supervisor
-    )
+    # Redis starts with the supervisor; run.py starts the rest once the database is migrated
+    autostart: bool = False
     priority: int = 100  # started in ascending order, stopped in descending order
     stop_seconds: int = 10  # after SIGTERM, then SIGKILL
     group: str | None = "fleet"  # a group's processes are stopped together; None: a group of its own
-
-    @property
-    def process(self) -> str:
-        """Its name in supervisorctl and the RPC interface."""
-        return f"{self.group}:{self.name}" if self.group else self.name
 
 
 @dataclass(frozen=True)
@@ -171,7 +165,7 @@ def wait_for_rpc(layout: Layout, supervisord: subprocess.Popen, timeout: float =
 
 # supervisord's own log: only what a person must see reaches the terminal (a death, giving up, a kill), once.
 SUPERVISOR_LINE = re.compile(r"^\S+ \S+ (?P<level>[A-Z]+) (?P<text>.*)$")
-SUPERVISOR_SHOWN = re.compile(r"^(WARN|ERRO|CRIT)$")
+SUPERVISOR_SHOWN = {"WARN", "ERRO", "CRIT"}
 SUPERVISOR_QUIET = (  # said at every start, and answered here: the socket is 0700 in var/, run as whoever runs it
     "running without any HTTP authentication checking",
     "Supervisor is running as root",
@@ -185,7 +179,7 @@ def supervisor_line(line: str) -> str | None:
         return None
     text = match["text"]
     if text.startswith("gave up:") or (
-        SUPERVISOR_SHOWN.match(match["level"]) and not any(quiet in text for quiet in SUPERVISOR_QUIET)
+        match["level"] in SUPERVISOR_SHOWN and not any(quiet in text for quiet in SUPERVISOR_QUIET)
     ):
         return text
     return None
