@@ -1,6 +1,6 @@
 """The paper's numbers (Section 4, Tables 3-8, 13 and 14), transcribed as printed, with their units.
 
-Source: /work/shared/seed/paper.txt (the text extraction flattens the tables; the rows and columns below are the
+Source: the paper (Rajapaksha & Jayasundara) (the text extraction flattens the tables; the rows and columns below are the
 printed ones). Two remarks on the printed units, kept as printed and corrected alongside:
 - Tables 1 and 3-6 print angular speeds in "ms^-1"; an angular speed is in rad/s, which is what we command.
 - Table 3-5 stop rows are labelled with the stop-time angular speed ω_z^e (Table 1), same grid as the start rows.

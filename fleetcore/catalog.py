@@ -1,6 +1,6 @@
 """Robot models the simulator knows: body, limits and the ROS interface each real robot shows.
 
-Values come from ../shared/reference/robot_profiles.yaml; each profile says which limits it took.
+Values come from tests/data/robot_profiles.yaml; each profile says which limits it took.
 The interface (nodes, topics, services) is what the real robot's launch files give under rosbridge.
 """
 
@@ -8,6 +8,39 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
+# The portal's velocity limits per model, when a robot's params do not say (registration reads these; the
+# simulator's models below take theirs from here too, so the two never drift apart).
+# (model, ros_version or 0 for any) -> (max_linear m/s, max_angular rad/s, source in robot_profiles.yaml)
+LIMITS = {
+    ("turtlebot3_burger", 0): (0.22, 2.84, "turtlebot3_burger.teleop_limits"),
+    ("turtlebot3_waffle", 0): (0.26, 1.82, "turtlebot3_waffle.teleop_limits"),
+    ("husky", 1): (1.0, 2.0, "clearpath_husky.ros1.controller_limits"),
+    ("husky", 2): (1.0, 1.0, "clearpath_husky.ros2_husky_repo_humble.controller"),
+    ("tiago", 1): (1.0, 2.0944, "pal_tiago.ros1.controller_limits"),
+    ("tiago", 2): (1.0, 1.05, "pal_tiago.ros2.controller_limits"),
+    ("jackal", 0): (2.0, 4.0, "clearpath_jackal.ros1.controller_limits"),
+    ("fetch", 0): (1.0, 4.5, "fetch.ros1.base_controller"),
+    ("spot", 0): (0.5, 0.5, "boston_dynamics_spot_ros1_driver.velocity_limits_driver_defaults"),
+}
+DEFAULT_LIMITS = (0.22, 1.0, "default: the slowest model we know")
+
+# Model signatures: a model key when the URDF name, or any node/topic name, contains one of the words.
+SIGNATURES = (
+    ("turtlebot3_waffle", ("turtlebot3_waffle", "waffle")),
+    ("turtlebot3_burger", ("turtlebot3", "turtlebot")),
+    ("husky", ("husky",)),
+    ("tiago", ("tiago", "pmb2", "play_motion")),
+    ("jackal", ("jackal",)),
+    ("fetch", ("fetch",)),
+    ("spot", ("spot_ros", "spot")),
+)
+
+
+def limit(model: str, ros_version: int = 0) -> tuple[float, float]:
+    """(max linear m/s, max angular rad/s) of a model: its ROS version's entry, else the any-version one."""
+    linear, angular, _ = LIMITS.get((model, ros_version)) or LIMITS.get((model, 0)) or DEFAULT_LIMITS
+    return linear, angular
 
 
 @dataclass(frozen=True)
@@ -75,9 +108,9 @@ MODELS = {
         mass=1.0,
         # teleop_limits (0.22 m/s, 2.84 rad/s) and the Gazebo diff drive's wheelAcceleration 1 rad/s^2 ...
         # ... is for the wheels; we take DWA acc_lim_x 2.5 / acc_lim_theta 3.2 as the body limits.
-        max_v=0.22,
-        min_v=-0.22,
-        max_w=2.84,
+        max_v=limit("turtlebot3_burger")[0],
+        min_v=-limit("turtlebot3_burger")[0],
+        max_w=limit("turtlebot3_burger")[1],
         acc_v=2.5,
         acc_w=3.2,
         nav_speed=0.22,
@@ -93,9 +126,9 @@ MODELS = {
         width=0.5709,
         offset_x=0.0,
         mass=50.0,
-        max_v=1.0,
-        min_v=-1.0,
-        max_w=2.0,
+        max_v=limit("husky", 1)[0],
+        min_v=-limit("husky", 1)[0],
+        max_w=limit("husky", 1)[1],
         acc_v=3.0,
         acc_w=6.0,
         cmd_timeout=0.25,
@@ -111,9 +144,9 @@ MODELS = {
         width=0.55,
         offset_x=0.0,
         mass=70.0,
-        max_v=1.0,
+        max_v=limit("tiago", 1)[0],
         min_v=-0.2,
-        max_w=2.0944,
+        max_w=limit("tiago", 1)[1],
         acc_v=1.0,
         acc_w=2.0944,
         cmd_timeout=0.25,
@@ -132,9 +165,9 @@ MODELS = {
         mass=32.0,
         # driver defaults max_linear_velocity_x/y 0.5, max_angular_velocity_z 0.5; the driver sets
         # no acceleration limit, we take 1.0 m/s^2 and 1.0 rad/s^2 (the body's own smoothing).
-        max_v=0.5,
-        min_v=-0.5,
-        max_w=0.5,
+        max_v=limit("spot")[0],
+        min_v=-limit("spot")[0],
+        max_w=limit("spot")[1],
         acc_v=1.0,
         acc_w=1.0,
         max_vy=0.5,
@@ -157,7 +190,8 @@ def urdf(name: str, profile: ModelProfile) -> str:
     """Return a small URDF: base_footprint, base_link and the model's wheel or leg joints."""
     links = [
         '  <link name="base_footprint"/>',
-        f'  <link name="base_link"><collision><geometry><box size="{profile.length} {profile.width} 0.2"/>'
+        f'  <link name="base_link"><collision><origin xyz="{profile.offset_x} 0 0"/>'
+        f'<geometry><box size="{profile.length} {profile.width} 0.2"/>'
         "</geometry></collision></link>",
         '  <joint name="base_joint" type="fixed"><parent link="base_footprint"/><child link="base_link"/>'
         "</joint>",

@@ -1,6 +1,6 @@
 """ROS map_server map files (YAML + PGM) as an occupancy grid, without Django.
 
-Follows ../shared/reference/rosbridge_protocol.md section 6: ROS 1 map_server's loader and
+Follows docs/reference/rosbridge_protocol.md section 6: ROS 1 map_server's loader and
 map_saver's writer (trinary / scale / raw modes, negate, thresholds, bottom-left origin).
 """
 

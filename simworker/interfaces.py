@@ -1,6 +1,6 @@
 """The ROS graph each simulated robot shows: nodes, topics, services and params per model.
 
-Names and types follow ../shared/reference/robot_profiles.yaml. Every name is put under the robot's
+Names and types follow tests/data/robot_profiles.yaml. Every name is put under the robot's
 namespace (e.g. `/robot1`), as a namespaced launch would.
 """
 

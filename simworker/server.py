@@ -1,6 +1,6 @@
 """A rosbridge v2 WebSocket server for one simulated endpoint (asyncio + websockets).
 
-Faithful to ../shared/reference/rosbridge_protocol.md §2-4 and §7: the server never sends `status`,
+Faithful to docs/reference/rosbridge_protocol.md §2-4 and §7: the server never sends `status`,
 `png` or `fragment` ops; bad input is logged and dropped, only a failed service call answers
 (`result: false` with the error text). Every client has a bounded send queue drained by its own writer
 task, so a client that never reads loses messages (and is cut off) without slowing anyone else.

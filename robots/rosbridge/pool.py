@@ -1,8 +1,9 @@
-"""Rosbridge links for code that already runs on an event loop (the portal's WebSocket consumers).
+"""One rosbridge link per endpoint per event loop: the registry every user of a link goes through.
 
 `await client(url)` returns this loop's RosbridgeClient for url, kept up (reconnecting after restarts), so a
-publish is one WebSocket send on the caller's own loop: no thread hop, unlike the synchronous facade
-(robots.rosbridge.sync) that Django views and Celery tasks use.
+publish is one WebSocket send on the caller's own loop. The portal's WebSocket consumers use it on the web
+process's loop; the synchronous facade (robots.rosbridge.sync) wraps the same registry on its loop thread, so a
+process has one link per endpoint per loop, whoever asks.
 """
 
 from __future__ import annotations
@@ -18,13 +19,26 @@ _LOOPS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, dict[str, Rosbridge
 )
 
 
-async def client(url: str, connect_timeout: float = 2.0) -> RosbridgeClient:
-    """The running loop's connected client for url; LinkDown with the reason if it cannot connect in time."""
+async def get(url: str) -> RosbridgeClient:
+    """The running loop's client for url, started (it connects in the background), up or not yet."""
     clients = _LOOPS.setdefault(asyncio.get_running_loop(), {})
     link = clients.get(url)
     if link is None:  # set before the first await: concurrent callers share one client
         link = clients[url] = RosbridgeClient(url, reconnect=True, ping_interval=2.0)
         await link.start()
+    return link
+
+
+async def drop(url: str) -> None:
+    """Close the running loop's link to url; the next get() opens a new one."""
+    link = _LOOPS.get(asyncio.get_running_loop(), {}).pop(url, None)
+    if link is not None:
+        await link.close()
+
+
+async def client(url: str, connect_timeout: float = 2.0) -> RosbridgeClient:
+    """The running loop's connected client for url; LinkDown with the reason if it cannot connect in time."""
+    link = await get(url)
     if not link.is_connected and not await link.wait_connected(connect_timeout):
         raise LinkDown(f"{url}: not connected ({link.last_error or 'connecting'})")
     return link

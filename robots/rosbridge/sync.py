@@ -15,7 +15,8 @@ import threading
 from collections.abc import Callable
 from functools import cache
 
-from robots.rosbridge.client import RosbridgeClient, Subscription
+from robots.rosbridge import pool
+from robots.rosbridge.client import Subscription
 from robots.rosbridge.errors import LinkDown
 
 
@@ -64,8 +65,7 @@ class SyncClient:
 
     def __init__(self, runner: LoopThread, url: str) -> None:
         self.runner, self.url = runner, url
-        self.client = RosbridgeClient(url, reconnect=True, ping_interval=2.0)
-        runner.run(self.client.start())  # connects (and reconnects) in the background
+        self.client = runner.run(pool.get(url))  # the loop's one link to url; connects in the background
 
     def _run(self, coro, timeout: float | None = None):
         return self.runner.run(coro, timeout)
@@ -105,12 +105,12 @@ class SyncClient:
         with self.runner.lock:
             if self.runner.clients.get(self.url) is self:
                 del self.runner.clients[self.url]
-        self._run(self.client.close())
+        self._run(pool.drop(self.url))
 
 
-async def _close_all(clients: list[SyncClient]) -> None:
+async def _close_all(_clients: list[SyncClient]) -> None:
     """Close the links, then end what else runs on the loop (the WebSockets' keepalives), as asyncio.run would."""
-    await asyncio.gather(*(c.client.close() for c in clients), return_exceptions=True)
+    await pool.close_all()  # the SyncClients' links and any other link opened on this loop (fast stops)
     others = asyncio.all_tasks() - {asyncio.current_task()}
     for task in others:
         task.cancel()

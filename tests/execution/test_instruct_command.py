@@ -42,3 +42,33 @@ def test_instruct_as_a_viewer_is_refused(turtle_world, viewer):
 def test_instruct_unknown_user(turtle_world):
     with pytest.raises(CommandError, match="no user named 'nobody'"):
         call_command("instruct", "move turtlebot to A", user="nobody")
+
+
+@pytest.mark.parametrize(
+    ("words", "speed"), [("very slowly", "very slow"), ("slowly", "slow"), ("at normal speed", "normal")]
+)
+def test_instruct_speed_words_drive_the_robot_at_that_speed(turtle_world, fleet_admin, words, speed):
+    """Every speed word the interpreter knows runs, and the simulated robot's applied speed stays within it."""
+    import threading
+
+    from fleetcore.steps import speed_factor
+
+    Location.objects.create(map=Location.objects.first().map, name="Dock", x=-1.6, y=-0.5)
+    body = turtle_world.fleet.robots["turtlebot"].body
+    done, fastest = threading.Event(), [0.0]
+
+    def watch():
+        while not done.wait(0.02):
+            fastest[0] = max(fastest[0], abs(turtle_world.call(lambda: body.vx)))
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        call_command("instruct", f"move turtlebot {words} to Dock", user=fleet_admin.username, wait=True)
+    finally:
+        done.set()
+        watcher.join(5)
+    x, y, _ = turtle_world.call(turtle_world.fleet.robots["turtlebot"].pose)
+    assert abs(x - -1.6) < 0.15 and abs(y - -0.5) < 0.15  # it arrived
+    limit = Instruction.objects.get().robots.get().max_linear * speed_factor(speed)
+    assert 0.0 < fastest[0] <= limit * 1.05  # it moved, never faster than the word asked
