@@ -236,8 +236,21 @@ def render_typed_stop(summary: dict, result: dict | None) -> list[str]:
         "",
     ]
     lines += [f"- {note}" for note in (result or {}).get("notes", [])]
-    refused = [r for k in (reachable, unreachable) for s in k.values() for r in s.get("refused", [])]
-    lines += [f"- refused or failed: {r}" for r in refused[:5]]
+    for phase, kinds_here in (("", reachable), (" (unreachable robot registered)", unreachable)):
+        first, floor = kinds_here.get("first_typed", {}), kinds_here.get("floor", {})
+        if first:
+            lines.append(
+                f"- warm-up{phase}: the phase's first typed stop, robots idle: p50 {_fmt(first.get('p50'), 1)} ms, "
+                f"p99 {_fmt(first.get('p99'), 1)} ms (not in the table)"
+            )
+        if floor:
+            lines.append(
+                f'- HTTP floor{phase}: the same POST interpreting "stop" without running it '
+                "(POST /api/interpreter/interpret) answered in p50 "
+                f"{_fmt(floor.get('answered_ms'), 1)} ms, p99 {_fmt(floor.get('answered_p99_ms'), 1)} ms"
+            )
+        for kind, stats in kinds_here.items():
+            lines += [f"- {kind}{phase} answered: {text}" for text in stats.get("said", [])]
     return [*lines, ""]
 
 

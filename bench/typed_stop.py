@@ -25,6 +25,7 @@ import contextlib
 import http.client
 import json
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from http.cookies import SimpleCookie
 
@@ -164,18 +165,28 @@ class Samples:
     ms: list[float | None] = field(default_factory=list)
     moving: list[bool] = field(default_factory=list)
     answered_ms: list[float] = field(default_factory=list)
-    refused: list[str] = field(default_factory=list)
+    said: Counter = field(default_factory=Counter)  # answers other than "done", and how often
 
     def summary(self) -> dict:
         stats = summarize(self.ms)
+        answered = summarize(self.answered_ms)
         return {
             **stats,
             "missing": sum(v is None for v in self.ms),
             "moving": sum(self.moving),
             "stops": len(self.ms),
-            "answered_ms": summarize(self.answered_ms)["p50"],
-            "refused": self.refused[:5],
+            "answered_ms": answered["p50"],
+            "answered_p99_ms": answered["p99"],
+            "said": [f"{n}x {text}" for text, n in self.said.most_common(5)],
+            "ms": [None if v is None else round(v, 1) for v in self.ms],
         }
+
+
+def gist(body: dict, status: int, data: dict) -> str:
+    """What the portal said to a stop that did not simply succeed: the robots it did not stop, and why."""
+    outcome = str(data.get("outcome") or data.get("detail") or "")
+    unreached = "; ".join(part for part in outcome.split("; ") if not part.endswith(": stopped"))
+    return f"{json.dumps(body)} -> HTTP {status} {data.get('status', '')}: {unreached or outcome}"[:240]
 
 
 class TypedStop:
@@ -187,11 +198,18 @@ class TypedStop:
         self.extra: list[RobotLink] = []  # registered, not moving, not measured (the unreachable robot)
 
     async def phase(self, kinds, trials: int) -> dict[str, dict]:
-        """`trials` rounds of every kind of stop, interleaved (a drift of the machine touches each alike)."""
-        await self.driver.stop(self.links + self.extra)  # warm-up: the web process loads targets, opens links
+        """`trials` rounds of every kind of stop, interleaved (a drift of the machine touches each alike).
+
+        Before them, a socket stop (the web process loads its stop targets and opens its links) and one typed
+        stop, robots idle (the web process interprets its first instruction), both kept apart as warm-up
+        ("first_typed"). Each round also times the same POST that interprets "stop" without running it
+        ("floor": what the HTTP request costs before any stop work)."""
+        await self.driver.stop(self.links + self.extra)
         await asyncio.sleep(SETTLE_S)
-        samples = {kind: Samples() for kind in kinds}
+        samples = {kind: Samples() for kind in (*kinds, "first_typed", "floor")}
+        await typed_all(self, samples["first_typed"], moving=False)
         for _ in range(trials):
+            await self.post(samples["floor"], "/api/interpreter/interpret", {"text": "stop"})
             for kind in kinds:
                 await TRIALS[kind](self, samples[kind])
         return {kind: s.summary() for kind, s in samples.items()}
@@ -222,12 +240,13 @@ class TypedStop:
         t0, answered, status, data = await asyncio.to_thread(self.console.post, path, body)
         samples.answered_ms.append((answered - t0) * 1000)
         if status >= 300 or data.get("status") in ("refused", "failed", "needs_user"):
-            samples.refused.append(f"{body}: HTTP {status} {str(data.get('outcome') or data)[:160]}")
+            samples.said[gist(body, status, data)] += 1
         return t0
 
 
-async def typed_all(run: TypedStop, samples: Samples) -> None:
-    await run.start_moving()
+async def typed_all(run: TypedStop, samples: Samples, moving: bool = True) -> None:
+    if moving:
+        await run.start_moving()
     t0 = await run.post(samples, "/api/instructions", {"text": "stop"})
     await asyncio.sleep(SETTLE_S)
     for link in run.links:
@@ -354,14 +373,17 @@ def typed_stop_why(summary: dict, reachable: dict, unreachable: dict) -> str:
     missing = sum(k.get("missing", 0) for k in (reachable.get("typed", {}), unreachable.get("typed", {})))
     if worst and max(worst) <= GOAL_MS and not missing:
         return ""
-    answered = reachable.get("typed", {}).get("answered_ms")
+    typed, floor = reachable.get("typed", {}), reachable.get("floor", {})
     return (
-        f"typed stop p99 {summary['p99']} ms, {summary['unreachable']['p99']} ms with an unreachable robot "
-        f"registered (goal ≤ {GOAL_MS:g} ms); {missing} robot(s) got no zero within {SETTLE_S:g} s. Before the "
-        "zero leaves, the request passes uvicorn and Django's middleware (session, user, CSRF), the API's "
-        'permission check, the interpreter ("stop") and the role check, then hops to the web process\'s event '
-        "loop (execution/fast_stop.py stop_blocking) for the Redis flags and the publishes; the portal answered "
-        f"the POST after {answered} ms (p50: the rest of the stop, database writes and control.stop)."
+        f"typed stop p50 {summary['p50']} ms, p99 {summary['p99']} ms; with an unreachable robot registered "
+        f"p99 {summary['unreachable']['p99']} ms (goal ≤ {GOAL_MS:g} ms); {missing} robot(s) got no zero within "
+        f"{SETTLE_S:g} s. Before the zero leaves, the request passes uvicorn and Django's middleware (session, "
+        'user, CSRF), the API\'s permission check, the interpreter ("stop") and the role check, then hops to '
+        "the web process's event loop (execution/fast_stop.py stop_blocking) for the Redis flags and the "
+        f'publishes. The same POST interpreting "stop" without running it was answered in p50 '
+        f"{floor.get('answered_ms')} ms, p99 {floor.get('answered_p99_ms')} ms; the page socket's stop, which "
+        f"skips the HTTP request, took p50 {summary['socket']['p50']} ms. The typed stop's answer came after "
+        f"p50 {typed.get('answered_ms')} ms (database writes and execution.control.stop, after the zeros)."
     )
 
 
