@@ -24,6 +24,7 @@ import asyncio
 import contextlib
 import http.client
 import json
+import os
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -309,6 +310,7 @@ async def typed_stop(bench) -> dict:
     from bench.run import hand_register
 
     trials = bench.cfg["typed_stop_trials"]
+    load = [os.getloadavg()[0]]
     links = [bench.exec_link(name) for name in ROBOTS]
     forgotten = await asyncio.to_thread(forget_others, bench.exec_sim.urls.values())
     reception = Reception(bench.exec_sim)
@@ -328,11 +330,17 @@ async def typed_stop(bench) -> dict:
             run.extra = [ghost]
             unreachable = await run.phase(UNREACHABLE_KINDS, trials)
             accepted = silent.accepted
+        load.append(os.getloadavg()[0])
     finally:
         await driver.close()
         console.close()
         await asyncio.to_thread(unregister, GHOST)
-    return typed_stop_result(reachable, unreachable, len(links), forgotten, accepted)
+    result = typed_stop_result(reachable, unreachable, len(links), forgotten, accepted)
+    cores = os.cpu_count()
+    result["notes"].append(
+        f"machine load (1-min average) {' -> '.join(f'{x:.1f}' for x in load)} on {cores} cores"
+    )
+    return result
 
 
 def typed_stop_result(reachable: dict, unreachable: dict, robots: int, forgotten: int, accepted: int) -> dict:
