@@ -36,7 +36,7 @@ MODES = {
         "time_scale": 8.0,  # the execution experiments' world runs 8x faster than real time
         "success_trials": 1,
         "stop_repeats": 3,
-        "typed_stop_trials": 2,  # rounds of each kind of stop (typed, typed for one robot, socket, button)
+        "typed_stop_trials": 3,  # rounds of each kind of stop (typed, typed for one robot, socket, button)
         "exec_limit_s": 90,
         "typed_stop_limit_s": 240,
     },

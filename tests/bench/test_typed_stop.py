@@ -138,3 +138,16 @@ def test_the_silent_endpoint_accepts_and_never_answers():
     assert accepted == 1
     with pytest.raises(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
         pass  # closed with the block
+
+
+@pytest.mark.django_db
+def test_robots_on_endpoints_the_world_does_not_serve_are_unregistered_and_counted():
+    from robots.models import Binding, Robot
+
+    kept = Robot.objects.create(name="robot1", endpoint="ws://served")
+    gone = Robot.objects.create(name="robot8", endpoint="ws://stopped")
+    Binding.objects.create(
+        robot=gone, action="move", target="/robot8/cmd_vel", message_type="geometry_msgs/Twist"
+    )
+    assert typed_stop.forget_others(["ws://served"]) == 1  # robots, not their bindings
+    assert list(Robot.objects.values_list("name", flat=True)) == [kept.name]
