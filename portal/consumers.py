@@ -301,7 +301,7 @@ class FleetConsumer(_PageConsumer):
     def snapshot(self):
         return snapshots.fleet_snapshot()
 
-    async def robots_poses(self, event):
+    async def fleet_poses(self, event):
         await self.send_json(event)
 
 
@@ -320,7 +320,7 @@ class RobotConsumer(_PageConsumer):
         robot = Robot.objects.filter(pk=self.robot_id).first()
         return snapshots.robot_snapshot(robot) if robot else None
 
-    async def robots_poses(self, event):
+    async def fleet_poses(self, event):
         mine = [pose for pose in event["poses"] if pose["id"] == self.robot_id]
         if mine:
             await self.send_json({"type": "fleet.poses", "poses": mine})
