@@ -37,8 +37,10 @@ def env_int(name: str, default: int, minimum: int = 0, maximum: int = 10**9) -> 
         value = int(raw.strip())
     except ValueError:
         raise ImproperlyConfigured(f"{name}: expected a whole number, got {raw!r}") from None
-    if not minimum <= value <= maximum:
-        raise ImproperlyConfigured(f"{name}: expected a number from {minimum} to {maximum}, got {value}")
+    if value < minimum:
+        raise ImproperlyConfigured(f"{name}: must be at least {minimum}, got {value}")
+    if value > maximum:
+        raise ImproperlyConfigured(f"{name}: must be at most {maximum}, got {value}")
     return value
 
 

@@ -13,6 +13,7 @@ from django.shortcuts import get_object_or_404, redirect, render
 
 from access.roles import requires
 from audit.models import AuditEntry
+from execution import fast_stop
 from execution.models import Instruction, TimeSlot
 from places.models import Location, Map
 from portal import snapshots
@@ -257,6 +258,8 @@ def stop(request):
     robots = payload.get("robots", "all")
     if isinstance(robots, str) and robots != "all":
         robots = ids_from_text(robots.split(","))
+    if robots == "all" or (isinstance(robots, list) and all(isinstance(pk, int) for pk in robots)):
+        fast_stop.stop_blocking(robot_ids=robots)  # flags and zeros first, as the socket's stop does
     reply = run_command(request.user, {"command": "stop", "robots": robots})
     return _answer(request, reply["ok"], reply["detail"], 200 if reply["ok"] else 403)
 

@@ -72,16 +72,3 @@ def table12_world(exec_settings, transactional_db):
         sim.robots = register(sim, ["turtlebot", "husky", "tiago"])
         TimeSlot.objects.update(enabled=True)
         yield sim
-
-
-@pytest.fixture
-def seeded_ontology(transactional_db):
-    """The interpreter's seed terms (a transactional test before this one flushed the migration's rows)."""
-    import importlib
-
-    from django.apps import apps
-
-    from interpreter import versions
-
-    importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
-    versions.bump_ontology()

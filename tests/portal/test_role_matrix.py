@@ -196,6 +196,7 @@ def _api_url(path: str, world) -> str:
     values = {
         "slot_id": world["slot"].pk,
         "instruction_id": 1,
+        "record_id": 1,
         "name": world["robot"].name,
         "action": "odometry",
     }
@@ -297,6 +298,7 @@ def _message(command: str, robot_id: int) -> dict:
     examples = {
         "stop": {"command": "stop", "robots": [robot_id]},
         "teleop": {"command": "teleop", "robot": robot_id, "linear": 0.1, "angular": 0.0},
+        "instruct": {"command": "instruct", "text": "flurble"},  # asked back (type V): nothing is dispatched
     }
     return {**examples[command], "ref": command}
 
