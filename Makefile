@@ -13,7 +13,8 @@ $(STAMP): pyproject.toml requirements.lock
 	$(PY) -m pip install --quiet -r requirements.lock
 	touch $(STAMP)
 
-## run: set up everything and start the whole system (web, worker, simulated fleet, Redis) on http://127.0.0.1:8000
+## run: set up everything and start the whole system (web, workers, simulated fleet, Redis) on http://127.0.0.1:8000,
+## each process restarted when it dies; Ctrl-C stops everything (status 0)
 run: $(STAMP)
 	$(PY) -m fleet.run
 
@@ -42,4 +43,4 @@ format: $(STAMP)
 	$(VENV)/bin/ruff check --fix .
 
 clean:
-	rm -rf var/*.sqlite3 var/*.sock var/static
+	rm -rf var/*.sqlite3 var/*.sock var/static var/appendonly.aof var/log var/supervisord.*

@@ -16,6 +16,7 @@ import itertools
 import math
 import time
 
+from bench.typed_stop import typed_stop
 from experiments import paper
 from experiments.probe import Reception
 from experiments.stats import summarize
@@ -386,6 +387,7 @@ EXPERIMENTS = {
     "exp6_sequence": exp6_sequence,
     "exp7_success": exp7_success,
     "stop_queued": stop_queued,
+    "typed_stop": typed_stop,
 }
 
 

@@ -16,6 +16,7 @@ SUMMARY_KEYS = (
     "command_latency_ms",
     "direct_latency_ms",
     "stop_latency_ms",
+    "typed_stop_latency_ms",
     "registration_s",
     "identification_ms_1200_topics",
     "interpreter_per_s",
@@ -29,6 +30,14 @@ GOALS = (
     (("command_latency_ms", "1", "p99"), "<=", 20, "command to robot p99 ≤ 20 ms, 1 robot", "{:.1f} ms"),
     (("command_latency_ms", "100", "p99"), "<=", 50, "command to robot p99 ≤ 50 ms, 100 moving", "{:.1f} ms"),
     (("stop_latency_ms", "p99"), "<=", 20, "stop p99 ≤ 20 ms with 100 instructions queued", "{:.1f} ms"),
+    (("typed_stop_latency_ms", "p99"), "<=", 20, "typed stop p99 ≤ 20 ms, 10 robots moving", "{:.1f} ms"),
+    (
+        ("typed_stop_latency_ms", "unreachable", "p99"),
+        "<=",
+        20,
+        "typed stop p99 ≤ 20 ms, 10 moving and one robot unreachable",
+        "{:.1f} ms",
+    ),
     (("registration_s", "100"), "<=", 5, "100 robots registered in ≤ 5 s", "{:.2f} s"),
     (
         ("identification_ms_1200_topics",),
@@ -57,6 +66,16 @@ def build_summary(results: dict[str, dict]) -> dict:
         "command_latency_ms": {n: {"p50": None, "p99": None} for n in ("1", "10", "100")},
         "direct_latency_ms": {n: {"p50": None, "p99": None} for n in ("1", "10", "100")},
         "stop_latency_ms": {"p50": None, "p99": None, "robots": None, "queued": None},
+        "typed_stop_latency_ms": {
+            "p50": None,
+            "p99": None,
+            "robots": None,
+            **{
+                k: {"p50": None, "p99": None}
+                for k in ("unreachable", "one_robot", "socket", "stop_all_button")
+            },
+            "ratio_p50": None,
+        },
         "registration_s": {"1": None, "10": None, "100": None},
         "identification_ms_1200_topics": None,
         "interpreter_per_s": None,
@@ -183,6 +202,69 @@ def _ratio(a, b):
     return a / b if a is not None and b else None
 
 
+def render_typed_stop(summary: dict, result: dict | None) -> list[str]:
+    """A typed stop against the STOP buttons, same run: every kind of stop, with and without an unreachable robot."""
+    from bench.typed_stop import GOAL_MS, KINDS
+
+    typed = summary["typed_stop_latency_ms"]
+    kinds = (result or {}).get("kinds") or {}
+    reachable, unreachable = kinds.get("reachable", {}), kinds.get("unreachable", {})
+    socket_p50 = reachable.get("socket", {}).get("p50")
+    lines = [
+        "## Typed stop: the console against the STOP buttons (same run)",
+        "",
+        f"Stop issued -> zero Twist received at each robot's endpoint, {_fmt(typed['robots'])} robots turning on "
+        "the spot; then the same with one more robot registered whose endpoint accepts TCP and never answers.",
+        "",
+        "| stop | p50 / p99 (ms) | one robot unreachable: p50 / p99 (ms) | p50 ÷ socket stop p50 | "
+        "portal answered, p50 (ms) | stops without a zero / robot not moving |",
+        "|---|---|---|---|---|---|",
+    ]
+    for kind, text in KINDS.items():
+        here, there = reachable.get(kind, {}), unreachable.get(kind, {})
+        lines.append(
+            f"| {text} | {_pair(here)} | {_pair(there)} | {_fmt(_ratio(here.get('p50'), socket_p50), 2)} | "
+            f"{_fmt(here.get('answered_ms'), 1)} | {_misses(here)} |"
+        )
+    worst = [p for p in (typed["p99"], typed["unreachable"]["p99"]) if p is not None]
+    verdict = "not measured" if not worst else ("met" if max(worst) <= GOAL_MS else "MISSED")
+    lines += [
+        "",
+        f"Goal: typed stop p99 ≤ {GOAL_MS:g} ms with 10 robots moving, also with an unreachable robot registered: "
+        f"**{verdict}** (p99 {_fmt(typed['p99'], 1)} ms; {_fmt(typed['unreachable']['p99'], 1)} ms with the "
+        f"unreachable robot). Typed ÷ socket stop at p50: {_fmt(typed['ratio_p50'], 2)}.",
+        "",
+    ]
+    lines += [f"- {note}" for note in (result or {}).get("notes", [])]
+    for phase, kinds_here in (("", reachable), (" (unreachable robot registered)", unreachable)):
+        first, floor = kinds_here.get("first_typed", {}), kinds_here.get("floor", {})
+        if first:
+            lines.append(
+                f"- warm-up{phase}: the phase's first typed stop, robots idle: p50 {_fmt(first.get('p50'), 1)} ms, "
+                f"p99 {_fmt(first.get('p99'), 1)} ms (not in the table)"
+            )
+        if floor:
+            lines.append(
+                f'- HTTP floor{phase}: the same POST interpreting "stop" without running it '
+                "(POST /api/interpreter/interpret) answered in p50 "
+                f"{_fmt(floor.get('answered_ms'), 1)} ms, p99 {_fmt(floor.get('answered_p99_ms'), 1)} ms"
+            )
+        for kind, stats in kinds_here.items():
+            lines += [f"- {kind}{phase} answered: {text}" for text in stats.get("said", [])]
+    return [*lines, ""]
+
+
+def _pair(stats: dict) -> str:
+    return f"{_fmt(stats.get('p50'), 1)} / {_fmt(stats.get('p99'), 1)}" if stats else "–"
+
+
+def _misses(stats: dict) -> str:
+    if not stats:
+        return "–"
+    still = stats.get("stops", 0) - stats.get("moving", 0)
+    return f"{stats.get('missing', 0)} / {still} of {stats.get('stops', 0)}"
+
+
 def render_table(table: paper.PaperTable, results: dict[str, dict]) -> str:
     """The paper's table with 'paper / ours' in every cell, same rows and columns."""
     ours = our_table(table, results)
@@ -220,6 +302,7 @@ def render_markdown(results: dict[str, dict], summary: dict, mode: str, plots: l
         "",
     ]
     parts += render_latency(summary)
+    parts += render_typed_stop(summary, results.get("typed_stop"))
     missed = [(n, r["missed"]) for n, r in results.items() if r.get("missed")]
     if missed:
         parts += ["## Goals missed: why", ""] + [f"- **{n}**: {text}" for n, text in missed] + [""]

@@ -36,7 +36,9 @@ MODES = {
         "time_scale": 8.0,  # the execution experiments' world runs 8x faster than real time
         "success_trials": 1,
         "stop_repeats": 3,
+        "typed_stop_trials": 3,  # rounds of each kind of stop (typed, typed for one robot, socket, button)
         "exec_limit_s": 90,
+        "typed_stop_limit_s": 240,
     },
     "full": {
         "repeats": 5,
@@ -51,7 +53,9 @@ MODES = {
         "time_scale": 8.0,  # as quick: times are reported in simulated seconds; 20 trials at real time take hours
         "success_trials": 20,
         "stop_repeats": 10,
+        "typed_stop_trials": 10,
         "exec_limit_s": 3600,
+        "typed_stop_limit_s": 3600,
     },
 }
 COMPONENTS = {  # bench module (owned by its component's engineer) -> (the JSON it writes, summary keys in it)
@@ -302,7 +306,7 @@ class Bench:
 
     def exec_plan(self) -> list[tuple[str, str, object]]:
         """The execution experiments: run on their own world once the big one is stopped."""
-        names = ("exp5_move", "exp6_sequence", "stop_queued", "exp7_success")
+        names = ("exp5_move", "exp6_sequence", "stop_queued", "exp7_success", "typed_stop")
         return [(name, name, lambda n=name: self.needs_execution(n)) for name in names]
 
     async def run_all(self, only: set[str] | None = None, plan=None) -> None:
@@ -313,7 +317,8 @@ class Bench:
             await client.close()
         self.clients.clear()
 
-    EXEC_ENDPOINTS = ("robots", "turtlebot", "husky", "tiago")
+    EXEC_ENDPOINTS = ("robots", "turtlebot", "husky", "tiago", "extra")
+    EXEC_EXTRA = 3  # robot5..robot7, parked in the corner room 3, registered by typed_stop only
     EXEC_ROBOTS = ("robot1", "robot2", "robot3", "robot4", "turtlebot", "husky", "tiago")
 
     def exec_link(self, name: str):
@@ -329,14 +334,16 @@ class Bench:
 
         if self.exec_sim is None:
             self.exec_sim = self.stack.enter_context(
-                running_world("paper", endpoints=self.EXEC_ENDPOINTS, time_scale=self.time_scale)
+                running_world(
+                    "paper", extra=self.EXEC_EXTRA, endpoints=self.EXEC_ENDPOINTS, time_scale=self.time_scale
+                )
             )
             links = [self.exec_link(n) for n in self.EXEC_ROBOTS]
             await asyncio.to_thread(hand_register, links)
         self.portal.start_web()
         self.portal.start_worker()
         self.portal.start_links()  # live poses: the engine routes around robots parked on the way
-        limit = self.cfg["exec_limit_s"]
+        limit = self.cfg.get(f"{name}_limit_s", self.cfg["exec_limit_s"])
         try:
             return await asyncio.wait_for(execution.run(self, name), limit)
         except TimeoutError:

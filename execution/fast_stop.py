@@ -101,6 +101,9 @@ class Targets:
         wanted = set(names)
         return [target.robot_id for target in self.by_robot.values() if target.name in wanted]
 
+    def knows(self, names) -> bool:
+        return set(names) <= {target.name for target in self.by_robot.values()}
+
     def load_now(self) -> None:
         """Load the targets in this thread (a process that never had a page socket: the CLI, a worker)."""
         self.by_robot = load_targets()
@@ -148,17 +151,19 @@ async def stop_now(robot_ids) -> int:
     return sum(await asyncio.gather(*(zero(target) for target in targets)))
 
 
-def stop_blocking(names, timeout: float = 2.0) -> int:
+def stop_blocking(names=None, robot_ids=None, timeout: float = 2.0) -> int:
     """stop_now for synchronous callers (the API, the CLI, a worker): flags and zeros before any database write.
 
-    Inside an ASGI request (a view running in a thread of the web process) it runs on the web process's own loop,
-    whose links the pages keep up; elsewhere on this process's rosbridge loop thread (robots.rosbridge.sync),
-    loading the targets first if this process never did. An unreachable robot never delays the others: each
-    zero is sent on its own link, none waits for a connection (connect_timeout 0).
+    names (or "all") or robot_ids. Inside an ASGI request (a view running in a thread of the web process) it runs
+    on the web process's own loop, whose links the pages keep up; elsewhere on this process's rosbridge loop
+    thread (robots.rosbridge.sync), loading the targets first if this process never did, or again when a name
+    is not among them (a robot registered since). An unreachable robot never delays the others: each zero is
+    sent on its own link, none waits for a connection (connect_timeout 0).
     """
-    if not TARGETS.by_robot:
+    if not TARGETS.by_robot or (names not in (None, "all") and not TARGETS.knows(names)):
         TARGETS.load_now()
-    robot_ids = TARGETS.ids(names)
+    if robot_ids is None:
+        robot_ids = TARGETS.ids(names)
     if getattr(SyncToAsync.threadlocal, "main_event_loop", None) is not None:
         return async_to_sync(stop_now)(robot_ids)
     from robots.rosbridge import sync

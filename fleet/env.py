@@ -37,8 +37,10 @@ def env_int(name: str, default: int, minimum: int = 0, maximum: int = 10**9) -> 
         value = int(raw.strip())
     except ValueError:
         raise ImproperlyConfigured(f"{name}: expected a whole number, got {raw!r}") from None
-    if not minimum <= value <= maximum:
-        raise ImproperlyConfigured(f"{name}: expected a number from {minimum} to {maximum}, got {value}")
+    if value < minimum:
+        raise ImproperlyConfigured(f"{name}: must be at least {minimum}, got {value}")
+    if value > maximum:
+        raise ImproperlyConfigured(f"{name}: must be at most {maximum}, got {value}")
     return value
 
 
@@ -167,3 +169,15 @@ def env_str(name: str, default: str | None = None, min_length: int = 0) -> str |
     if len(raw) < min_length:
         raise ImproperlyConfigured(f"{name}: must be at least {min_length} characters long")
     return raw
+
+
+def env_networks(name: str, default: list[str]) -> list[str]:
+    """Read a comma-separated allow-list of networks (CIDRs), addresses and host names."""
+    from robots.endpoints import AllowList
+
+    entries = env_list(name, default)
+    try:
+        AllowList.parse(entries)
+    except ValueError as exc:
+        raise ImproperlyConfigured(f"{name}: {exc}") from None
+    return entries

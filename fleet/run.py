@@ -1,74 +1,242 @@
-"""`make run`: migrate, set up the demo, then start every process of the system under one honcho manager.
+"""`make run`: migrate, set up the demo, then run every process of the system under supervisord.
 
-One Ctrl-C stops them all; nothing is left running or listening.
+A process that dies is started again (fleet/supervision.py says how); its output and supervisord's one line about
+its death reach the terminal with its name in front. One Ctrl-C stops everything and `make run` exits 0.
+
+    FLEET_PORT           the portal's port (8000)
+    FLEET_SIM_PORT_BASE  the simulated endpoints' first port (9090; the demo world uses seven from there)
+    FLEET_VAR_DIR        the database, Redis's data, the logs (var/log/) and the supervisor's files (var/)
+    REDIS_URL            a Redis to use; unset, an embedded one is run (and restarted) under var/
+
+`supervisorctl -c var/supervisord.conf status` shows the processes while it runs.
 """
 
+from __future__ import annotations
+
 import os
+import signal
 import subprocess
 import sys
 import threading
 import time
 import urllib.request
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
-from honcho.manager import Manager
-
-from fleet import embedded_redis
+from fleet.supervision import Layout, LogRelay, Program, render_config, start_supervisord, wait_for_rpc
 
 BASE_DIR = Path(__file__).resolve().parent.parent
-HOST, PORT = "127.0.0.1", int(os.environ.get("FLEET_PORT", "8000"))
+HOST = "127.0.0.1"
 
 
-def processes(python: str) -> dict[str, str]:
-    """The system's processes, each a shell command (honcho runs them and merges their output)."""
-    manage = f"{python} manage.py"
-    procs = {
-        "web": f"{python} -m uvicorn fleet.asgi:application --host {HOST} --port {PORT} --log-level warning",
+@dataclass(frozen=True)
+class Setup:
+    """What this `make run` runs where, from the environment."""
+
+    port: int
+    sim_port_base: int
+    var_dir: Path
+    world: str
+    redis_url: str | None  # None: the embedded Redis
+
+    @classmethod
+    def from_env(cls, environ=os.environ) -> Setup:
+        return cls(
+            port=int(environ.get("FLEET_PORT", "8000")),
+            sim_port_base=int(environ.get("FLEET_SIM_PORT_BASE", "9090")),
+            var_dir=Path(environ.get("FLEET_VAR_DIR", BASE_DIR / "var")).resolve(),
+            world=environ.get("FLEET_WORLD", "paper"),
+            redis_url=environ.get("REDIS_URL") or None,
+        )
+
+    @property
+    def redis_socket(self) -> Path:
+        return self.var_dir / "redis.sock"
+
+    @property
+    def url(self) -> str:
+        return f"http://{HOST}:{self.port}/"
+
+    def env(self) -> dict[str, str]:
+        """Every process's environment: ours, with the Redis they share and unbuffered output."""
+        redis_url = self.redis_url or f"unix://{self.redis_socket}"
+        return {
+            **os.environ,
+            "REDIS_URL": redis_url,
+            "FLEET_VAR_DIR": str(self.var_dir),
+            "PYTHONUNBUFFERED": "1",
+        }
+
+
+def programs(setup: Setup, python: str = sys.executable) -> list[Program]:
+    """The system's processes; the embedded Redis first (started with the supervisor, stopped last)."""
+    manage = [python, "manage.py"]
+    celery = [python, "-m", "celery", "-A", "fleet", "-q", "worker", "-l", "warning"]
+    sim_ports = ["--port-base", str(setup.sim_port_base)]
+    web_options = ["--host", HOST, "--port", str(setup.port), "--log-level", "warning"]
+    web_options += ["--timeout-graceful-shutdown", "5"]
+    listed = [
+        Program("web", [python, "-m", "uvicorn", "fleet.asgi:application", *web_options]),
         # Instructions block while robots move, so that worker runs many threads; stops and registrations
         # have a worker of their own and never wait behind a long instruction.
-        "worker": f"{python} -m celery -A fleet -q worker -n instructions@%h -Q instructions -P threads -c 32 -l warning",
-        "control": f"{python} -m celery -A fleet -q worker -n control@%h -Q control,registration -c 1 -l warning",
-        "sim": f"{manage} simworker --world paper",
-        "links": f"{manage} robotlinks --register-world paper",
-        "scheduler": f"{manage} scheduler",  # time slots, lost workers, stalled robot queues (issue 6)
-    }
-    return procs
+        Program(
+            "worker", [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "32"]
+        ),
+        Program("control", [*celery, "-n", "control@%h", "-Q", "control,registration", "-c", "1"]),
+        Program("sim", [*manage, "simworker", "--world", setup.world, *sim_ports]),
+        Program("links", [*manage, "robotlinks", "--register-world", setup.world, *sim_ports]),
+        # time slots, lost workers, stalled robot queues (issue 6)
+        Program("scheduler", [*manage, "scheduler"]),
+    ]
+    if setup.redis_url is None:
+        serve = [python, "-m", "fleet.embedded_redis", "serve", "--socket", str(setup.redis_socket)]
+        listed.insert(0, Program("redis", serve, autostart=True, priority=10, group=None))
+    return listed
 
 
 def main() -> int:
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    if os.environ.get("REDIS_URL"):
-        return start_all(env)
-    socket_path = BASE_DIR / "var" / "redis.sock"
-    redis = embedded_redis.start(socket_path)
-    print(f"embedded Redis at unix://{socket_path}", flush=True)
+    setup = Setup.from_env()
+    with foreground_terminal():
+        return run(setup)
+
+
+def run(setup: Setup) -> int:
+    """Start the supervisor, bring the system up under it; return once the supervisor has stopped."""
+    layout = Layout(setup.var_dir)
+    listed = programs(setup)
+    layout.log_dir.mkdir(parents=True, exist_ok=True)
+    layout.config.write_text(render_config(listed, layout, BASE_DIR))
+    # made before anything runs: what the logs held already is not repeated
+    relay = LogRelay(layout, [program.name for program in listed])
+    supervisord = start_supervisord(layout, setup.env())
+    stopping = stop_on_signals(supervisord)
+    relay.start()
     try:
-        return start_all({**env, "REDIS_URL": f"unix://{socket_path}"})
+        return bring_up(setup, layout, supervisord, stopping)
     finally:
-        embedded_redis.stop(redis, socket_path)
+        stop(supervisord)
+        relay.stop()
 
 
-def start_all(env: dict) -> int:
+def bring_up(setup: Setup, layout: Layout, supervisord: subprocess.Popen, stopping: threading.Event) -> int:
+    """Wait for the supervisor (and the embedded Redis), prepare the database, start the rest, say where to go;
+    then wait for the supervisor to end. 0 when we were asked to stop."""
+    proxy = wait_for_rpc(layout, supervisord)
+    if proxy is None:
+        print(f"make run: the supervisor did not start (is another `make run` using {setup.var_dir}?)")
+        return supervisord.poll() or 1
+    if setup.redis_url is None and not wait_for_redis(setup.redis_socket, supervisord):
+        print(f"make run: the embedded Redis did not answer on {setup.redis_socket}: see its lines above")
+        return 0 if stopping.is_set() else 1
+    login = prepare(setup.env(), stopping)
+    if login is None:
+        return 0 if stopping.is_set() else 1
+    proxy.supervisor.startAllProcesses(False)
+    print(f"\n  Fleet portal: {setup.url}  (starting; Ctrl-C stops everything)\n", flush=True)
+    threading.Thread(target=say_when_ready, args=(setup.url, login), name="announcement", daemon=True).start()
+    code = supervisord.wait()
+    return 0 if stopping.is_set() else code or 1
+
+
+def wait_for_redis(socket_path: Path, supervisord: subprocess.Popen, timeout: float = 30.0) -> bool:
+    """Whether the embedded Redis answers a PING within timeout (it replays its append-only file first)."""
+    import redis
+    from redis.backoff import NoBackoff
+    from redis.retry import Retry
+
+    client = redis.Redis(unix_socket_path=str(socket_path), socket_timeout=1, retry=Retry(NoBackoff(), 0))
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and supervisord.poll() is None:
+        try:
+            if client.ping():
+                print(f"embedded Redis at unix://{socket_path} (its data kept there too)", flush=True)
+                return True
+        except redis.RedisError:
+            time.sleep(0.1)  # not listening yet, or still loading its data
+    return False
+
+
+def prepare(env: dict[str, str], stopping: threading.Event) -> str | None:
+    """Migrate and set up the demo; the login line it says, or None if either failed or we are stopping."""
     python = sys.executable
-    subprocess.run(
-        [python, "manage.py", "migrate", "--noinput", "-v", "0"], cwd=BASE_DIR, env=env, check=True
-    )
+    migrate = subprocess.run([python, "manage.py", "migrate", "--noinput", "-v", "0"], cwd=BASE_DIR, env=env)
+    if migrate.returncode or stopping.is_set():
+        return None
     # its output is kept to say the login again later; its errors go straight to the terminal
     demo = subprocess.run(
         [python, "manage.py", "setup_demo"], cwd=BASE_DIR, env=env, stdout=subprocess.PIPE, text=True
     )
     print(demo.stdout, end="", flush=True)
-    if demo.returncode:
-        return demo.returncode
-    login = next((line for line in demo.stdout.splitlines() if line.startswith("login:")), "")
-    manager = Manager()
-    for name, command in processes(python).items():
-        manager.add_process(name, command, cwd=str(BASE_DIR), env=env)
-    url = f"http://{HOST}:{PORT}/"
-    print(f"\n  Fleet portal: {url}  (starting; Ctrl-C stops everything)\n", flush=True)
-    threading.Thread(target=lambda: print(announcement(url, login), flush=True), daemon=True).start()
-    manager.loop()
-    return manager.returncode or 0
+    if demo.returncode or stopping.is_set():
+        return None
+    return next((line for line in demo.stdout.splitlines() if line.startswith("login:")), "")
+
+
+def stop_on_signals(supervisord: subprocess.Popen) -> threading.Event:
+    """Ctrl-C, SIGTERM or a closed terminal: we tell supervisord, which stops every process (Redis last) and then
+    itself."""
+    stopping = threading.Event()
+
+    def _stop(*_args):
+        stopping.set()
+        if supervisord.poll() is None:
+            supervisord.send_signal(signal.SIGTERM)
+
+    for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, _stop)
+    return stopping
+
+
+def stop(supervisord: subprocess.Popen, timeout: float = 60.0) -> None:
+    """Ask supervisord to stop (if it has not) and wait for it; it waits for each process in turn."""
+    if supervisord.poll() is None:
+        supervisord.send_signal(signal.SIGTERM)
+    try:
+        supervisord.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        supervisord.kill()
+        supervisord.wait()
+
+
+@contextmanager
+def foreground_terminal() -> Iterator[None]:
+    """Hold the terminal's foreground in a process group of our own, so that Ctrl-C reaches us but not make.
+
+    make answers SIGINT by killing itself with it once its child has ended, whatever the child's status: `make
+    run` would end with status 130 however cleanly everything stopped. With our own foreground group, make never
+    sees the Ctrl-C and exits with ours. Ctrl-Z is ignored meanwhile: it would stop us alone, with make still in
+    the shell's foreground, and leave the terminal hanging. Without a terminal (a test, CI) nothing changes.
+    """
+    fd = sys.stdin.fileno() if sys.stdin and sys.stdin.isatty() else None
+    if fd is None or os.tcgetpgrp(fd) != os.getpgrp():
+        yield
+        return
+    previous = os.getpgrp()
+    os.setpgid(0, 0)
+    _set_foreground(fd, os.getpgrp())
+    suspend = signal.signal(signal.SIGTSTP, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTSTP, suspend)
+        _set_foreground(fd, previous)
+
+
+def _set_foreground(fd: int, group: int) -> None:
+    """tcsetpgrp from a background group, which would otherwise stop us with SIGTTOU."""
+    previous = signal.signal(signal.SIGTTOU, signal.SIG_IGN)
+    try:
+        os.tcsetpgrp(fd, group)
+    except OSError:
+        pass  # the terminal went away
+    finally:
+        signal.signal(signal.SIGTTOU, previous)
+
+
+def say_when_ready(url: str, login: str) -> None:
+    print(announcement(url, login), flush=True)
 
 
 def announcement(url: str, login: str, timeout: float = 60.0) -> str:

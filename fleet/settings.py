@@ -14,6 +14,7 @@ from fleet.env import (
     env_database,
     env_int,
     env_list,
+    env_networks,
     env_redis_url,
     env_secret_key,
     env_str,
@@ -112,6 +113,8 @@ CHANNEL_LAYERS = {
 
 CELERY_BROKER_URL = celery_broker_url(REDIS_URL)
 CELERY_RESULT_BACKEND = celery_broker_url(REDIS_URL)
+# A task survives its worker's death: acknowledged only once it has ended, given back to the queue when the worker
+# process is lost, taken one at a time; a task delivered again finds its own claims and does nothing twice.
 CELERY_TASK_ACKS_LATE = True
 CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
@@ -123,8 +126,26 @@ CELERY_TASK_ROUTES = {
     "execution.tasks.stop_*": {"queue": "control"},
     "execution.tasks.*": {"queue": "instructions"},
 }
-CELERY_BROKER_TRANSPORT_OPTIONS = {"visibility_timeout": 3600}
+# Redis lost and back: workers retry the broker for ever (Celery's default gives up after 100 tries and exits), and
+# a connection that went quiet is found by a PING every 10 s. A message taken but never acknowledged (its worker
+# was killed, or Redis went away under it) is delivered again after the visibility timeout, which must be longer
+# than the longest task: one instruction's run, whose steps each end within a time that follows from their distance
+# (minutes on the demo maps), so an hour.
+CELERY_BROKER_CONNECTION_RETRY = True
 CELERY_BROKER_CONNECTION_RETRY_ON_STARTUP = True
+CELERY_BROKER_CONNECTION_MAX_RETRIES = None
+CELERY_BROKER_TRANSPORT_OPTIONS = {
+    "visibility_timeout": 3600,
+    "health_check_interval": 10,
+    "retry_on_timeout": True,
+}
+# A running instruction drives its robots over rosbridge, not Redis: a broker outage does not cancel it (its late
+# acknowledgement may fail; the redelivery then finds it finished).
+CELERY_WORKER_CANCEL_LONG_RUNNING_TASKS_ON_CONNECTION_LOSS = False
+CELERY_RESULT_BACKEND_ALWAYS_RETRY = True
+CELERY_RESULT_BACKEND_MAX_RETRIES = 10
+CELERY_REDIS_BACKEND_HEALTH_CHECK_INTERVAL = 10
+CELERY_REDIS_RETRY_ON_TIMEOUT = True
 
 AUTH_PASSWORD_VALIDATORS = [
     {"NAME": "django.contrib.auth.password_validation.MinimumLengthValidator", "OPTIONS": {"min_length": 8}},
@@ -202,3 +223,16 @@ FLEET_IDLE_TIMEOUT_SECONDS = 600
 FLEET_EXECUTE = os.environ.get("FLEET_EXECUTE", "celery")
 FLEET_EXECUTE_QUEUE = os.environ.get("FLEET_EXECUTE_QUEUE", "")
 FLEET_EXEC_KEY_PREFIX = os.environ.get("FLEET_EXEC_KEY_PREFIX", "fleet:exec")
+
+# ----- Robots are untrusted input (issue 15; robots/limits.py, robots/endpoints.py) -----
+# Caps on what one rosbridge endpoint may send: a WebSocket frame (and a reassembled fragmented message), the
+# names one rosapi list may hold (topics, nodes, services, params), and one robot_description. Each refusal names
+# its variable. Registration connects only to hosts in FLEET_ROBOT_ALLOWED_NETWORKS (CIDRs, addresses or host
+# names; default loopback and the private ranges).
+FLEET_ROBOT_MAX_FRAME_MB = env_int("FLEET_ROBOT_MAX_FRAME_MB", 16, minimum=1)
+FLEET_ROBOT_MAX_TOPICS = env_int("FLEET_ROBOT_MAX_TOPICS", 100_000, minimum=1)
+FLEET_ROBOT_MAX_URDF_MB = env_int("FLEET_ROBOT_MAX_URDF_MB", 4, minimum=1)
+FLEET_ROBOT_ALLOWED_NETWORKS = env_networks(
+    "FLEET_ROBOT_ALLOWED_NETWORKS",
+    ["127.0.0.0/8", "::1/128", "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "fc00::/7"],
+)

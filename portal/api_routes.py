@@ -1,6 +1,6 @@
 """Locations, schedules and instructions in the JSON API."""
 
-from datetime import datetime, time
+from datetime import time
 
 from ninja import Query, Router, Schema
 from ninja.errors import HttpError
@@ -12,6 +12,7 @@ from audit import records as audit
 from execution.models import Instruction, TimeSlot
 from places.models import Location
 from portal.api_types import Id, LocalTime, Name, NonBlank, Text, get_or_404, path_id
+from portal.schemas import InstructionOut
 from robots.models import Robot
 
 router = Router()
@@ -83,23 +84,6 @@ class InstructionIn(Schema):
         if self.robot_ids is not None and self.destination is None:
             raise ValueError("destination: robot_ids need a destination")
         return self
-
-
-class InstructionOut(Schema):
-    id: int
-    text: str
-    user: str | None = Field(None, alias="user.username")
-    type: str
-    status: str
-    parse: dict
-    outcome: str
-    error: str
-    received_at: datetime
-    interpreted_at: datetime | None
-    dispatched_at: datetime | None
-    first_command_at: datetime | None
-    motion_started_at: datetime | None
-    finished_at: datetime | None
 
 
 @router.get("/locations", response=list[LocationOut], tags=["locations"])

@@ -20,7 +20,9 @@ import live
 from access.roles import may, refusal
 from execution import fast_stop
 from execution.held_teleop import HeldTeleop
+from interpreter.service import warm_up
 from portal import snapshots, socket_input
+from portal.schemas import InstructionOut
 from portal.socket_input import BadFrame
 
 log = logging.getLogger(__name__)
@@ -128,6 +130,24 @@ def checked_teleops(user, robot_ids) -> dict:
     return grants
 
 
+def command_instruct(user, content: dict) -> tuple[str, dict]:
+    """An instruction typed in the console, sent over the page's socket: the answer carries the instruction."""
+    from execution.instructions import submit
+    from execution.models import Instruction
+
+    text, answer_to = content.get("text"), content.get("answer_to")
+    if not isinstance(text, str) or not text.strip() or len(text) > 2000 or "\x00" in text:
+        raise CommandError("text: an instruction of 1 to 2000 characters")
+    question = None
+    if answer_to is not None:
+        try:
+            question = Instruction.objects.get(pk=socket_input.robot_id(answer_to), status="needs_user")
+        except (BadFrame, Instruction.DoesNotExist):
+            raise CommandError("answer_to: no question waits for an answer with that id") from None
+    instruction = _call(submit, text, user, "console", None, question)
+    return f"#{instruction.pk} {instruction.status}", {"instruction": InstructionOut.of(instruction)}
+
+
 @dataclass(frozen=True)
 class Command:
     """One message type a page may send: its handler and the ability (access.roles.ABILITIES) it needs."""
@@ -139,6 +159,7 @@ class Command:
 COMMANDS = {
     "stop": Command(command_stop, "control"),
     "teleop": Command(command_teleop, "control"),
+    "instruct": Command(command_instruct, "instruct"),
 }
 
 
@@ -148,13 +169,13 @@ def refused(user, name, exc: CommandError) -> None:
     audit.record(user, "command.refused", str(name)[:40], reason=str(exc))
 
 
-def result(content, ok: bool, detail: str) -> dict:
+def result(content, ok: bool, detail: str, **extra) -> dict:
     """The answer to one message: which command, the browser's ref, whether it was done, and why not."""
     name = content.get("command") if isinstance(content, dict) else None
     ref = content.get("ref") if isinstance(content, dict) else None
     name = name if isinstance(name, str) and len(name) <= 40 else None
     ref = ref if isinstance(ref, str | int) and not isinstance(ref, bool) and len(str(ref)) <= 100 else None
-    return {"type": "command.result", "command": name, "ref": ref, "ok": ok, "detail": detail}
+    return {"type": "command.result", "command": name, "ref": ref, "ok": ok, "detail": detail, **extra}
 
 
 def run_command(user, content) -> dict:
@@ -166,14 +187,19 @@ def run_command(user, content) -> dict:
     try:
         if not may(user, command.ability):
             raise CommandError(refusal(user, command.ability))
-        detail = command.handler(user, content)
+        detail, extra = _with_extra(command.handler(user, content))
     except CommandError as exc:
         refused(user, name, exc)
         return result(content, False, str(exc))
     except Exception as exc:  # a bug or the database: said in words, kept in the log
         log.exception("command %s failed", name)
         return result(content, False, _in_words(exc))
-    return result(content, True, detail)
+    return result(content, True, detail, **extra)
+
+
+def _with_extra(answer) -> tuple[str, dict]:
+    """A handler answers in words, or in words with data for the page."""
+    return answer if isinstance(answer, tuple) else (answer, {})
 
 
 class _PageConsumer(AsyncJsonWebsocketConsumer):
@@ -197,6 +223,10 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         self.limiter = socket_input.RateLimiter()
         if self.may_control:
             fast_stop.TARGETS.refresh()  # what a stop from this page needs, loaded before it is pressed
+        if self.abilities["instruct"]:
+            await database_sync_to_async(
+                warm_up, thread_sensitive=False
+            )()  # a first typed stop waits for no ontology
         self.joined = self.group_names()
         for group in self.joined:
             await self.channel_layer.group_add(group, self.channel_name)
@@ -257,9 +287,21 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
                 await self.refuse(content, str(exc))
                 return
             await fast_stop.stop_now(ids)  # a head start; run_command below checks, stops again, answers
+        if content.get("command") == "instruct" and self.abilities["instruct"]:
+            await self.typed_stop_head_start(content.get("text"))
         # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
         reply = await database_sync_to_async(run_command, thread_sensitive=False)(user, content)
         await self.send_json(reply)
+
+    async def typed_stop_head_start(self, text) -> None:
+        """A typed "stop ...": flags and zeros from this loop, as the STOP button's, before submit writes anything."""
+        from execution.instructions import stop_names
+
+        if not isinstance(text, str) or len(text) > 2000:
+            return  # command_instruct refuses it in words
+        names = await database_sync_to_async(stop_names, thread_sensitive=False)(text)
+        if names is not None:
+            await fast_stop.stop_now(fast_stop.TARGETS.ids(names))
 
     async def take_teleop(self, user, content) -> None:
         """Held buttons: checked once per press, repeats published from this loop (execution.held_teleop)."""

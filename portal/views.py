@@ -14,6 +14,7 @@ from django.shortcuts import get_object_or_404, redirect, render
 from access.roles import may, requires
 from alerts.models import Alert
 from audit.models import AuditEntry
+from execution import fast_stop
 from execution.models import Instruction, TimeSlot
 from places.models import Location, Map
 from portal import snapshots
@@ -99,6 +100,9 @@ def robot_list(request):
     return render(request, "fleet/robot_list.html", {"robots": snapshots.robot_rows(Robot.objects.all())})
 
 
+GRAPH_PAGE = 100  # topics, nodes or services per page of a robot's page
+
+
 @requires("view")
 def robot_detail(request, pk: int):
     """One robot: bindings and how each was found, its ROS graph, URDF facts, history, teleop and lease."""
@@ -108,9 +112,10 @@ def robot_detail(request, pk: int):
         "robot": robot,
         "row": row,
         "bindings": robot.bindings.all(),
-        "topics": robot.topics.all(),
-        "nodes": robot.nodes.all(),
-        "services": robot.services.all(),
+        # a robot may list 100,000 topics: the page shows one page of each list, never all of it
+        "topics": Paginator(robot.topics.all(), GRAPH_PAGE).get_page(request.GET.get("topics")),
+        "nodes": Paginator(robot.nodes.all(), GRAPH_PAGE).get_page(request.GET.get("nodes")),
+        "services": Paginator(robot.services.all(), GRAPH_PAGE).get_page(request.GET.get("services")),
         "facts": sorted((robot.description or {}).items()),
         "transitions": robot.transitions.select_related("instruction")[:30],
         "holds_it": row["holder"] == request.user.username,
@@ -138,9 +143,13 @@ def choose_binding(request, pk: int):
     if target not in {candidate.get("target") for candidate in binding.candidates}:
         messages.error(request, f"target: {target!r} is not one of the candidates for {binding}.")
         return redirect("registration")
-    from robots.binding import choose
+    from robots.binding import BindingRefused, choose
 
-    chosen = choose(binding.robot, binding.action, target, request.user)
+    try:
+        chosen = choose(binding.robot, binding.action, target, request.user)
+    except BindingRefused as exc:  # a candidate of a type the action cannot use
+        messages.error(request, str(exc))
+        return redirect("registration")
     messages.success(request, f"{chosen.robot.name}: {chosen.action} now uses {chosen.target}.")
     return redirect("registration")
 
@@ -265,6 +274,8 @@ def stop(request):
     robots = payload.get("robots", "all")
     if isinstance(robots, str) and robots != "all":
         robots = ids_from_text(robots.split(","))
+    if robots == "all" or (isinstance(robots, list) and all(isinstance(pk, int) for pk in robots)):
+        fast_stop.stop_blocking(robot_ids=robots)  # flags and zeros first, as the socket's stop does
     reply = run_command(request.user, {"command": "stop", "robots": robots})
     return _answer(request, reply["ok"], reply["detail"], 200 if reply["ok"] else 403)
 

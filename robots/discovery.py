@@ -16,20 +16,25 @@ else by registration after its model (`turtlebot3_burger`, then `turtlebot3_burg
 Infrastructure is never a robot nor a robot's topic (protocol §7): rosapi, rosbridge_websocket, rosout,
 /client_count, /connected_clients, /parameter_events, /gazebo/*, */get_loggers, */set_logger_level and the
 ROS 2 per-node parameter services. The `/gazebo` node itself stays: its plugins publish robot topics.
+
+Robots are untrusted input: every rosapi reply is checked against REPLIES (lists of names, text, numbers) and
+against the caps of robots.limits (names per list, param size) before anything is built from it; a reply that
+does not fit refuses the endpoint with a BadReply naming the service, the field and the cap's setting.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from urllib.parse import urlparse
 
-from fleetcore import geometry
 from fleetcore.bindings import norm_type
-from robots import urdf
+from robots import limits, urdf
 from robots.rosbridge import RosbridgeClient, RosbridgeError, ServiceError
+from robots.rosbridge.codec import preview
 
 INFRA_TOPICS = {"/rosout", "/rosout_agg", "/client_count", "/connected_clients", "/parameter_events"}
 INFRA_PREFIXES = ("/rosapi", "/rosbridge_websocket", "/gazebo/", "/rosout/")
@@ -48,6 +53,77 @@ INFRA_PARAMS = {"/rosdistro", "/rosversion", "/run_id"}
 WANTED_PARAMS = re.compile(r"robot_description$|max_vel|initial_pose|initialpose")
 VELOCITY_TYPES = {"geometry_msgs/Twist", "geometry_msgs/TwistStamped"}
 ROS1_ACTION_PARTS = ("goal", "cancel", "status", "result", "feedback")
+
+
+MAX_NAME = 255  # the name and type columns of the graph's tables
+CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+class BadReply(RosbridgeError):
+    """A rosapi reply of the wrong shape or above a cap: the endpoint is refused with this one-line reason."""
+
+
+def _names(value) -> bool:
+    return isinstance(value, list) and all(_name(v) for v in value)
+
+
+def _name(value) -> bool:
+    return isinstance(value, str) and len(value) <= MAX_NAME and not CONTROL.search(value)
+
+
+def _text(value) -> bool:
+    return isinstance(value, str) and "\x00" not in value
+
+
+def _number(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+# rosapi service -> field -> check; a missing field reads as empty (older rosapi versions omit some).
+REPLIES = {
+    "/rosapi/topics": {"topics": _names, "types": _names},
+    "/rosapi/nodes": {"nodes": _names},
+    "/rosapi/services": {"services": _names},
+    "/rosapi/get_param_names": {"names": _names},
+    "/rosapi/action_servers": {"action_servers": _names},
+    "/rosapi/get_ros_version": {"version": _number},
+    "/rosapi/node_details": {"publishing": _names, "subscribing": _names, "services": _names},
+    "/rosapi/service_type": {"type": _name},
+    "/rosapi/topic_type": {"type": _name},
+    "/rosapi/get_param": {"value": _text},
+}
+EXPECTED = {
+    _names: f"a list of names (text up to {MAX_NAME} characters)",
+    _name: f"a name (text up to {MAX_NAME} characters)",
+    _text: "text",
+    _number: "an integer",
+}
+
+
+async def rosapi(client: RosbridgeClient, service: str, args: dict | None = None) -> dict:
+    """Call a rosapi service and check its reply against REPLIES and the caps; BadReply says what is wrong."""
+    reply = await client.call_service(service, args)
+    caps = limits.current()
+    for key, valid in REPLIES[service].items():
+        if key not in reply:
+            continue
+        value = reply[key]
+        if not valid(value):
+            raise BadReply(
+                f"{client.url}: {service} answered {key!r} = {preview(value)}, not {EXPECTED[valid]}"
+            )
+        if isinstance(value, list) and len(value) > caps.topics:
+            raise BadReply(
+                f"{client.url}: refused: {service} lists {len(value)} {key}, more than the limit of "
+                f"{caps.topics} ({limits.TOPICS_SETTING})"
+            )
+    if len(reply.get("value") or "") > caps.urdf_bytes:
+        name = (args or {}).get("name", "a param")
+        raise BadReply(
+            f"{client.url}: refused: {name} is {limits.megabytes(len(reply['value']))}, more than the "
+            f"{limits.megabytes(caps.urdf_bytes)} limit ({limits.URDF_SETTING})"
+        )
+    return reply
 
 
 def is_infra(name: str, kind: str = "topic") -> bool:
@@ -113,7 +189,7 @@ async def discover(url: str, client: RosbridgeClient | None = None, concurrency:
 async def read_graph(client: RosbridgeClient, url: str, sem: asyncio.Semaphore) -> Graph:
     """Read topics, nodes with details, services with types, actions and param names."""
     try:
-        topics = await client.call_service("/rosapi/topics")
+        topics = await rosapi(client, "/rosapi/topics")
     except ServiceError as exc:
         raise RosbridgeError(f"{url}: rosapi does not answer /rosapi/topics ({exc})") from None
     except RosbridgeError as exc:
@@ -131,7 +207,7 @@ async def read_graph(client: RosbridgeClient, url: str, sem: asyncio.Semaphore) 
     )
     graph.ros_version = _ros_version(version, graph)
     await asyncio.gather(_nodes(client, graph, nodes, sem), _services(client, graph, services, sem))
-    graph.params = {n: None for n in names if isinstance(n, str) and not is_infra(n, "param")}
+    graph.params = {n: None for n in names if not is_infra(n, "param")}
     await _actions(client, graph, actions, sem)
     return graph
 
@@ -139,7 +215,7 @@ async def read_graph(client: RosbridgeClient, url: str, sem: asyncio.Semaphore) 
 async def _optional(client: RosbridgeClient, service: str, key: str, default=()):
     """Call a rosapi list service; a missing service (older rosapi) gives the default."""
     try:
-        return (await client.call_service(service)).get(key, default)
+        return (await rosapi(client, service)).get(key, default)
     except ServiceError:
         return default
 
@@ -151,11 +227,11 @@ async def _bounded(sem: asyncio.Semaphore, coro):
 
 def _topics(graph: Graph, reply: dict) -> None:
     names, types = reply.get("topics"), reply.get("types")
-    if not isinstance(names, list) or not isinstance(types, list):
-        raise RosbridgeError(f"{graph.url}: /rosapi/topics answered without topic and type lists")
+    if names is None or types is None:
+        raise BadReply(f"{graph.url}: /rosapi/topics answered without topic and type lists")
     for name, type_ in zip(names, types, strict=False):
-        if isinstance(name, str) and not is_infra(name):
-            graph.topics[name] = TopicInfo(name, type_ if isinstance(type_, str) else "")
+        if not is_infra(name):
+            graph.topics[name] = TopicInfo(name, type_)
 
 
 def _ros_version(version, graph: Graph) -> int:
@@ -166,9 +242,9 @@ def _ros_version(version, graph: Graph) -> int:
 
 
 async def _nodes(client: RosbridgeClient, graph: Graph, nodes, sem: asyncio.Semaphore) -> None:
-    names = [n for n in nodes if isinstance(n, str) and not is_infra(n, "node")]
+    names = [n for n in nodes if not is_infra(n, "node")]
     details = await asyncio.gather(
-        *(_bounded(sem, client.call_service("/rosapi/node_details", {"node": n})) for n in names),
+        *(_bounded(sem, rosapi(client, "/rosapi/node_details", {"node": n})) for n in names),
         return_exceptions=True,
     )
     for name, detail in zip(names, details, strict=True):
@@ -176,10 +252,7 @@ async def _nodes(client: RosbridgeClient, graph: Graph, nodes, sem: asyncio.Sema
             detail = {}
         elif isinstance(detail, BaseException):
             raise detail
-        entry = {
-            k: [x for x in detail.get(k, []) if isinstance(x, str)]
-            for k in ("publishing", "subscribing", "services")
-        }
+        entry = {k: list(detail.get(k, [])) for k in ("publishing", "subscribing", "services")}
         graph.nodes[name] = entry
         for key, side in (("publishing", "publishers"), ("subscribing", "subscribers")):
             for topic in entry[key]:
@@ -189,9 +262,9 @@ async def _nodes(client: RosbridgeClient, graph: Graph, nodes, sem: asyncio.Sema
 
 
 async def _services(client: RosbridgeClient, graph: Graph, services, sem: asyncio.Semaphore) -> None:
-    names = [s for s in services if isinstance(s, str) and not is_infra(s, "service")]
+    names = [s for s in services if not is_infra(s, "service")]
     replies = await asyncio.gather(
-        *(_bounded(sem, client.call_service("/rosapi/service_type", {"service": s})) for s in names),
+        *(_bounded(sem, rosapi(client, "/rosapi/service_type", {"service": s})) for s in names),
         return_exceptions=True,
     )
     for name, reply in zip(names, replies, strict=True):
@@ -202,7 +275,7 @@ async def _services(client: RosbridgeClient, graph: Graph, services, sem: asynci
 
 async def _actions(client: RosbridgeClient, graph: Graph, servers, sem: asyncio.Semaphore) -> None:
     """Action servers with their types: ROS 1 from the goal topic, ROS 2 from the hidden feedback topic."""
-    found = {s for s in servers if isinstance(s, str)}
+    found = set(servers)
     if graph.ros_version == 1:
         found |= {
             t.rsplit("/", 1)[0]
@@ -218,12 +291,14 @@ async def _actions(client: RosbridgeClient, graph: Graph, servers, sem: asyncio.
     names = sorted(found)
     replies = await asyncio.gather(
         *(
-            _bounded(sem, client.call_service("/rosapi/topic_type", {"topic": f"{n}/_action/feedback"}))
+            _bounded(sem, rosapi(client, "/rosapi/topic_type", {"topic": f"{n}/_action/feedback"}))
             for n in names
         ),
         return_exceptions=True,
     )
     for name, reply in zip(names, replies, strict=True):
+        if isinstance(reply, BadReply):
+            raise reply
         type_ = reply.get("type", "") if isinstance(reply, dict) else ""
         graph.actions[name] = type_.removesuffix("_FeedbackMessage")
 
@@ -289,11 +364,13 @@ async def read_robot_facts(client: RosbridgeClient, graph: Graph) -> None:
     """Fetch the params registration uses, parse the URDF, name the robot, read its start pose."""
     wanted = [n for n in graph.params if WANTED_PARAMS.search(n)]
     values = await asyncio.gather(
-        *(client.call_service("/rosapi/get_param", {"name": n}) for n in wanted), return_exceptions=True
+        *(rosapi(client, "/rosapi/get_param", {"name": n}) for n in wanted), return_exceptions=True
     )
     for name, reply in zip(wanted, values, strict=True):
         if isinstance(reply, dict):
             graph.params[name] = reply.get("value")
+        elif not isinstance(reply, ServiceError):  # a param that vanished is skipped; the rest is fatal
+            raise reply
     _read_urdf(graph)
     if not graph.name:
         graph.name = graph.urdf.name if graph.urdf and graph.urdf.name else ""  # registration names it
@@ -361,17 +438,32 @@ async def start_pose(
 def _pose_from_params(graph: Graph) -> tuple[list[float], str] | None:
     ns = graph.namespace
     value = decode_param(graph.params.get(f"{ns}/initial_pose"))
-    if isinstance(value, list) and len(value) >= 3 and all(isinstance(v, int | float) for v in value[:3]):
+    if isinstance(value, list) and len(value) >= 3 and all(finite(v) for v in value[:3]):
         return [float(v) for v in value[:3]], f"{ns}/initial_pose"
     for sep, keys in (("/", ("initial_pose_x", "initial_pose_y", "initial_pose_a")),
                       (":", ("initial_pose.x", "initial_pose.y", "initial_pose.yaw"))):  # fmt: skip
         names = [f"{ns}/amcl{sep}{k}" for k in keys]
         vals = [decode_param(graph.params.get(n)) for n in names]
-        if all(isinstance(v, int | float) for v in vals):
+        if all(finite(v) for v in vals):
             return [float(v) for v in vals], names[0].rsplit(sep, 1)[0]
     return None
 
 
 def _pose_of(pose: dict) -> list[float]:
-    x, y, yaw = geometry.pose_of(pose)
-    return [x, y, round(yaw, 6)]
+    """[x, y, yaw] of a geometry_msgs/Pose; ValueError unless every number is finite."""
+    p, q = pose["position"], pose["orientation"]
+    numbers = [p["x"], p["y"], q["x"], q["y"], q["z"], q["w"]]
+    if not all(finite(v) for v in numbers):
+        raise ValueError(f"not a pose: {preview(pose)}")
+    yaw = math.atan2(2 * (q["w"] * q["z"] + q["x"] * q["y"]), 1 - 2 * (q["y"] ** 2 + q["z"] ** 2))
+    return [float(p["x"]), float(p["y"]), round(yaw, 6)]
+
+
+def finite(value) -> bool:
+    """A real number a float holds (JSON allows NaN, Infinity and integers too large for a float)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False

@@ -48,6 +48,33 @@ RULES = ROLES
 NAV_ACTIONS = NAV_ACTION_SERVERS
 DEFAULT_KEYWORDS = {role.name: dict(role.keywords) for role in ROLES.values()}
 DEFAULT_SYNONYMS = {role.name: set(role.synonyms) for role in ROLES.values() if role.synonyms}
+# The action servers navigate can drive (types as norm_type spells them): ROS 1 move_base, ROS 2 Nav2.
+NAV_ACTION_TYPES = frozenset({"move_base_msgs/MoveBaseAction", "nav2_msgs/NavigateToPose"})
+
+
+def accepts(action: str, kind: str, type_: str) -> bool:
+    """Whether a binding of `action` may point at a `kind` ("topic", "action") of this type."""
+    rule = RULES.get(action)
+    if rule is None:
+        return False
+    type_ = norm_type(type_)
+    if kind == "topic":
+        return type_ in rule.types
+    if kind != "action":
+        return False
+    return (action == "navigate" and type_ in NAV_ACTION_TYPES) or type_ in rule.types  # dock: its own type
+
+
+def accepted(action: str) -> str:
+    """What a binding of `action` may point at, in words, for a refusal."""
+    rule = RULES.get(action)
+    if rule is None:
+        return "nothing (not an action)"
+    topics = " or ".join(sorted(rule.types))
+    servers = " or ".join(sorted(NAV_ACTION_TYPES)) if action == "navigate" else ""
+    return f"a {topics} topic" + (f", or a {servers} action server" if servers else "")
+
+
 NAV_NODES = {"move_base", "controller_server", "velocity_smoother", "bt_navigator"}
 TELEOP_WORDS = ("teleop", "joy", "marker", "keyboard")
 
@@ -182,8 +209,8 @@ def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:
             score, how = name_score(relative, action, vocab, RULES[action].canonical)
             found[action].append(Candidate(name, type_, "action", round(0.5 + score, 4), how))
         score, how = name_score(relative, "navigate", vocab, NAV_ACTIONS)
-        if score <= 0.1 and "navigat" not in relative:
-            continue  # another action server (arm, spin, dock): not navigation
+        if not accepts("navigate", "action", type_) or (score <= 0.1 and "navigat" not in relative):
+            continue  # another action server (arm, spin, dock), or one whose goals we cannot send
         bonus = 0.1 if any(k in type_ for k in ("MoveBase", "NavigateToPose")) else 0.0
         found["navigate"].append(Candidate(name, type_, "action", round(0.6 + score + bonus, 4), how))
     return found
@@ -200,7 +227,7 @@ def identify(
         ranked = sorted(found[action], key=lambda c: (-c.score, c.target))
         kept = [asdict(c) for c in ranked[:10]]
         choice = (user_choices or {}).get(action)
-        if choice and (target := _lookup(graph, choice)):
+        if choice and (target := _lookup(graph, action, choice)):
             kind, type_ = target
             results[action] = Result(action, choice, kind, type_, "user", 1.0, False, kept)
         elif not ranked:
@@ -214,11 +241,12 @@ def identify(
     return results
 
 
-def _lookup(graph: Graph, target: str) -> tuple[str, str] | None:
+def _lookup(graph: Graph, action: str, target: str) -> tuple[str, str] | None:
+    """(kind, type) of a person's earlier choice while the graph still has it with a type the action takes."""
     if target in graph.topics:
-        return "topic", graph.topics[target].type
-    if target in graph.actions:
-        return "action", graph.actions[target]
-    if target in graph.services:
-        return "service", graph.services[target]
-    return None
+        found = "topic", graph.topics[target].type
+    elif target in graph.actions:
+        found = "action", graph.actions[target]
+    else:
+        return None
+    return found if accepts(action, *found) else None

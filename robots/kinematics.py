@@ -10,7 +10,7 @@ from __future__ import annotations
 import re
 
 from fleetcore.catalog import DEFAULT_LIMITS, LIMITS, SIGNATURES
-from robots.discovery import Graph, decode_param
+from robots.discovery import Graph, decode_param, finite
 
 LINEAR = re.compile(r"linear[./]x[./]max_velocity$")
 ANGULAR = re.compile(r"angular[./]z[./]max_velocity$")
@@ -43,6 +43,6 @@ def _param(graph: Graph, pattern: re.Pattern) -> tuple[str, float] | None:
     for name, text in graph.params.items():
         if pattern.search(name):
             value = decode_param(text)
-            if isinstance(value, int | float) and not isinstance(value, bool) and value > 0:
+            if finite(value) and value > 0:  # a robot's NaN, Infinity or 1e400 is no limit
                 return name, float(value)
     return None

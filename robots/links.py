@@ -5,6 +5,12 @@ so a restarted endpoint is back within about 2 s and every subscription made on 
 client itself. A change of link state is written to the endpoint's robots (link_status, last_seen) and pushed
 through live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT seconds.
 
+A link survives anything one endpoint sends (robots.rosbridge.client): a frame with wrong fields is dropped
+and logged, a frame that is not rosbridge or larger than the frame limit closes the connection and the link
+reconnects, and an error in a hook, a callback or the reader is logged, never raised through the supervisor.
+A robot that drops while moving: its executor fails the step "link lost" (execution/steps.py: its odometry
+stops and its link says disconnected, or a command meets the dropped link).
+
 A link that drops raises a robot_offline alert for each robot behind it (resolved when it comes back), and
 every robot that was moving then (or whose executor failed its step with "link lost": owe_zero) is sent a
 zero velocity as soon as its link is back, before anything else can command it: a base without a command
@@ -166,12 +172,10 @@ class LinkManager:
         writer = asyncio.create_task(self._write_changes())
         try:
             while not self.stopping.is_set():
-                wanted = self.fixed if self.fixed is not None else await sync_to_async(registered_endpoints)()
-                for url in wanted:
-                    if url not in self.links:
-                        await self.add(url)
-                online = [u for u, c in self.links.items() if c.is_connected]
-                await sync_to_async(touch)(online)
+                try:
+                    await self._tick()
+                except Exception:  # the database away, say: log it and look again next time
+                    log.exception("links: one round of looking after the endpoints failed")
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(self.stopping.wait(), min(REFRESH, HEARTBEAT))
         finally:
@@ -180,14 +184,26 @@ class LinkManager:
             await self.changes.join()
             writer.cancel()
 
+    async def _tick(self) -> None:
+        """Add links for new endpoints (each on its own: one that fails does not stop the rest), touch the online."""
+        wanted = self.fixed if self.fixed is not None else await sync_to_async(registered_endpoints)()
+        for url in wanted:
+            if url not in self.links:
+                try:
+                    await self.add(url)
+                except Exception:
+                    log.exception("%s: could not start its link", url)
+        online = [u for u, c in self.links.items() if c.is_connected]
+        await sync_to_async(touch)(online)
+
     async def add(self, url: str) -> RosbridgeClient:
-        """Open a link to url and run the hooks on it."""
+        """Open a link to url and run the hooks on it (robots read first: if that fails, the next round retries)."""
+        robots = await sync_to_async(endpoint_robots)(url) if self.hooks else []
         client = RosbridgeClient(url, reconnect=True, ping_interval=1.0, max_backoff=1.6)
         client.on_link(lambda up, reason, url=url: self._changed(url, up, reason))
         self.links[url] = client
         await client.start()
         if self.hooks:
-            robots = await sync_to_async(endpoint_robots)(url)
             for hook in self.hooks:
                 try:
                     await hook(client, robots)

@@ -160,6 +160,17 @@ class Robot(models.Model):
         live.robot_status(self)
         return record
 
+    def clean(self):
+        """An endpoint typed in the admin is checked as registration checks it, and stored by its address."""
+        from robots import endpoints
+        from robots.registration import allow_list
+        from robots.rosbridge import RosbridgeError
+
+        try:
+            self.endpoint = endpoints.check(self.endpoint, allow_list())
+        except RosbridgeError as exc:
+            raise ValidationError({"endpoint": str(exc)}) from None
+
     def topic_name(self, relative: str) -> str:
         """Resolve a robot-relative topic name under this robot's namespace."""
         return f"{self.namespace.rstrip('/')}/{relative.lstrip('/')}"
@@ -261,6 +272,17 @@ class Binding(models.Model):
 
     def __str__(self):
         return f"{self.robot}.{self.action} -> {self.target or '?'}"
+
+    def clean(self):
+        """A target must be one of the robot's names, of a type the action accepts (the admin's forms ask this)."""
+        if not self.target or self.robot_id is None:
+            return
+        from robots.binding import BindingRefused, resolve_target
+
+        try:
+            self.kind, self.message_type = resolve_target(self.robot, self.action, self.target)
+        except BindingRefused as exc:
+            raise ValidationError({"target": exc.message}) from None
 
 
 class RegistrationRecord(models.Model):

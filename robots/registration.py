@@ -1,9 +1,17 @@
-"""Register rosbridge endpoints: discover, identify, store robots and their graph, record what changed.
+"""Register rosbridge endpoints: check, discover, identify, store robots and their graph, record what changed.
 
-Endpoints are discovered concurrently (one asyncio loop, one connection each); each endpoint's result is
-stored in its own transaction, so one endpoint that fails (unreachable, not rosbridge, silent, garbage)
-gives a one-line error for that endpoint while the others register. Re-registration updates rows in place,
-keyed by (endpoint, namespace); a person's binding choice survives while its target still exists.
+A batch never fails as a whole. Each URL asked for gets its own RegistrationRecord, created before anything
+connects (the API hands their ids back, so a background registration is always queryable) and always
+finished: registered, or refused with a one-line reason. Before connecting, each URL is parsed, resolved and
+checked against the allowed networks (robots.endpoints); aliases of one endpoint are discovered once.
+Endpoints are discovered concurrently (one asyncio loop, one connection each, ENDPOINTS_AT_ONCE at a time so
+that the frame limit bounds memory); each endpoint's result is stored in its own transaction. Robots are
+untrusted input: whatever one endpoint answers (nonsense, garbage, oversize) costs that endpoint alone.
+
+Errors never tell which ports are open: whatever fails before a rosbridge server has answered once
+(refused, no route, silent, HTTP, garbage) reads "unreachable (no rosbridge server answered)"; the precise
+reason goes to the log. Re-registration updates rows in place, keyed by (endpoint, namespace); a person's
+binding choice survives while its target still exists.
 """
 
 from __future__ import annotations
@@ -14,84 +22,180 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from django.conf import settings
 from django.db import transaction
 from django.utils import timezone
 
+import live
 from audit import records as audit
-from robots import identify, kinematics
-from robots.discovery import Graph, discover
+from robots import endpoints, identify, kinematics
+from robots.discovery import BadReply, Graph, discover
 from robots.models import Binding, Node, Param, RegistrationRecord, Robot, Service, Topic, robot_name_from
-from robots.rosbridge import RosbridgeClient, RosbridgeError
+from robots.rosbridge import FrameTooLarge, RosbridgeClient, RosbridgeError
 from robots.signals import robots_registered
 
 log = logging.getLogger("robots.registration")
 ENDPOINT_TIMEOUT = 15.0  # a whole endpoint's discovery, beyond the per-call timeouts
+ENDPOINTS_AT_ONCE = 4  # endpoints discovered concurrently: memory is at most this many frame limits' worth
 LIST_LIMIT = 50  # names kept per change list in RegistrationRecord.changes
+URL_SHOWN = 255  # characters of a URL kept in a record (the column's size)
+UNREACHABLE = "unreachable (no rosbridge server answered)"
 
 
 @dataclass
 class EndpointResult:
-    url: str
+    url: str  # as asked for
     ok: bool = False
     error: str = ""
     robots: list[str] = field(default_factory=list)
     changes: dict = field(default_factory=dict)
     record_id: int | None = None
+    endpoint: str = ""  # the canonical URL stored on the robots ("" when refused before resolution)
 
 
 # ----- discovery (async, no database) -----
 async def discover_one(url: str, call_timeout: float = 3.0) -> list[Graph] | RosbridgeError:
-    """Discover one endpoint; failures come back as the error, never raised."""
+    """Discover one endpoint; every failure comes back as a RosbridgeError with a one-line reason, never raised."""
     client = RosbridgeClient(url, call_timeout=call_timeout)
     try:
         await client.connect()
         return await asyncio.wait_for(discover(url, client), ENDPOINT_TIMEOUT)
+    except (BadReply, FrameTooLarge) as exc:
+        return exc
     except RosbridgeError as exc:
+        if not client.answered:  # nothing that speaks rosbridge: say so without telling what is there
+            log.info("%s", exc)
+            return RosbridgeError(f"{url}: {UNREACHABLE}")
         return exc
     except TimeoutError:
         return RosbridgeError(f"{url}: discovery took longer than {ENDPOINT_TIMEOUT:g} s")
+    except Exception as exc:  # a reply we did not foresee: that endpoint fails, the batch goes on
+        log.exception("%s: discovery failed", url)
+        return RosbridgeError(f"{url}: refused: discovery failed on what it answered ({type(exc).__name__})")
     finally:
         await client.close()
 
 
-async def discover_all(urls: list[str], call_timeout: float = 3.0) -> list[list[Graph] | RosbridgeError]:
-    return await asyncio.gather(*(discover_one(u, call_timeout) for u in urls))
+async def discover_all(
+    urls: list[str], call_timeout: float = 3.0, allowed: endpoints.AllowList | None = None
+) -> list[tuple[str, list[Graph] | RosbridgeError]]:
+    """(canonical URL or "", graphs or error) per URL; aliases of one endpoint are discovered once."""
+    allowed = allowed or allow_list()
+    resolved = await asyncio.gather(*(endpoints.resolve(u, allowed) for u in urls), return_exceptions=True)
+    unique = list(dict.fromkeys(r for r in resolved if isinstance(r, str)))
+    gate = asyncio.Semaphore(ENDPOINTS_AT_ONCE)
+
+    async def one(url: str):
+        async with gate:
+            return await discover_one(url, call_timeout)
+
+    found = dict(zip(unique, await asyncio.gather(*(one(u) for u in unique)), strict=True))
+    return [
+        (r, found[r]) if isinstance(r, str) else ("", _as_error(url, r))
+        for url, r in zip(urls, resolved, strict=True)
+    ]
+
+
+def _as_error(url: str, exc: BaseException) -> RosbridgeError:
+    if isinstance(exc, RosbridgeError):
+        return exc
+    log.error("%s: could not check the URL", url, exc_info=exc)
+    return RosbridgeError(f"{url[:URL_SHOWN]}: refused: not a URL the portal can check")
+
+
+def allow_list() -> endpoints.AllowList:
+    return endpoints.AllowList.parse(settings.FLEET_ROBOT_ALLOWED_NETWORKS)
 
 
 # ----- the entry point -----
-def register_endpoints(urls: list[str], user=None, call_timeout: float = 3.0) -> list[EndpointResult]:
-    """Register every endpoint (concurrently); return one result per URL, in order."""
-    urls = list(dict.fromkeys(u.strip() for u in urls if u and u.strip()))
-    found = asyncio.run(discover_all(urls, call_timeout))
-    return store_all(urls, found, user)
+def clean_urls(urls) -> list[str]:
+    """The URLs asked for, stripped, blanks and exact repeats left out, in order."""
+    return list(dict.fromkeys(u.strip() for u in urls if isinstance(u, str) and u.strip()))
 
 
-def store_all(urls: list[str], found: list, user=None) -> list[EndpointResult]:
-    """Store discovered graphs (or errors) and attach the current world's schedules."""
+def begin(urls: list[str], user=None) -> list[RegistrationRecord]:
+    """One record per URL, unfinished: what a background registration hands back before it starts."""
+    owner = user if _real(user) else None
+    return [RegistrationRecord.objects.create(endpoint=u[:URL_SHOWN], user=owner) for u in urls]
+
+
+def register_endpoints(
+    urls: list[str], user=None, call_timeout: float = 3.0, record_ids: list[int] | None = None
+) -> list[EndpointResult]:
+    """Register every endpoint (concurrently); return one result per URL, in order. Never raises for a URL."""
+    urls = clean_urls(urls)
+    records = _records(urls, user, record_ids)
+    try:
+        found = asyncio.run(discover_all(urls, call_timeout))
+        return store_all(urls, found, user, records)
+    finally:
+        abandon([r for r in records if r is not None])
+
+
+def _records(urls: list[str], user, record_ids: list[int] | None) -> list[RegistrationRecord | None]:
+    if record_ids is None:
+        return list(begin(urls, user))
+    by_id = RegistrationRecord.objects.in_bulk(record_ids)
+    return [by_id.get(pk) for pk in record_ids] + [None] * (len(urls) - len(record_ids))
+
+
+def abandon(records: list[RegistrationRecord], reason: str = "registration stopped unexpectedly") -> None:
+    """Finish, as failed, records a registration left unfinished (it stopped on an error of its own)."""
+    unfinished = RegistrationRecord.objects.filter(pk__in=[r.pk for r in records], finished_at=None)
+    unfinished.update(finished_at=timezone.now(), ok=False, error=reason)
+
+
+def store_all(urls: list[str], found: list, user=None, records=None) -> list[EndpointResult]:
+    """Store discovered graphs (or errors), one result per URL, and attach the current world's schedules."""
     vocab = load_vocabulary()
-    results = [store_endpoint(url, graphs, vocab, user) for url, graphs in zip(urls, found, strict=True)]
+    records = records or [None] * len(urls)
+    done: dict[str, EndpointResult] = {}
+    results = []
+    for url, (endpoint, graphs), record in zip(urls, found, records, strict=True):
+        first = done.get(endpoint) if endpoint else None
+        if first is not None:  # an alias of an endpoint already registered in this batch
+            result = EndpointResult(url, first.ok, first.error, list(first.robots), {}, None, endpoint)
+        else:
+            result = store_endpoint(url, graphs, vocab, user, endpoint=endpoint)
+            done[endpoint] = result
+        results.append(finish(result, record, user))
     registered = [robot for result in results if result.ok for robot in result.robots]
     if registered:
         robots_registered.send(sender=Robot, robots=registered)
     return results
 
 
-def store_endpoint(url: str, graphs, vocab: identify.Vocabulary, user=None) -> EndpointResult:
-    record = RegistrationRecord.objects.create(endpoint=url, user=user if _real(user) else None)
-    result = EndpointResult(url, record_id=record.pk)
+def store_endpoint(
+    url: str, graphs, vocab: identify.Vocabulary, user=None, endpoint: str = ""
+) -> EndpointResult:
+    """Store one endpoint's robots in one transaction; whatever goes wrong becomes that endpoint's error."""
+    endpoint = endpoint or url
+    result = EndpointResult(url, endpoint=endpoint if not isinstance(graphs, BaseException) else "")
     if isinstance(graphs, BaseException):
         result.error = str(graphs) or type(graphs).__name__
-    else:
+        return result
+    try:
         with transaction.atomic():
             for graph in graphs:
-                robot, changes = store_robot(url, graph, vocab)
+                robot, changes = store_robot(endpoint, graph, vocab)
                 result.robots.append(robot.name)
                 if changes:
                     result.changes[robot.name] = changes
-            missing = mark_missing(url, {g.namespace for g in graphs})
+            missing = mark_missing(endpoint, {g.namespace for g in graphs})
             if missing:
                 result.changes["missing_robots"] = missing
         result.ok = True
+    except Exception as exc:  # e.g. a name the database refuses: that endpoint fails, the batch goes on
+        log.exception("%s: could not store its robots", endpoint)
+        result.robots, result.changes = [], {}
+        result.error = f"{url}: refused: could not store what it answered ({type(exc).__name__})"
+    return result
+
+
+def finish(result: EndpointResult, record: RegistrationRecord | None, user=None) -> EndpointResult:
+    """Write the result into its record (created now when none was begun), push it and audit it."""
+    record = record or RegistrationRecord(endpoint=result.url[:URL_SHOWN], user=user if _real(user) else None)
+    record.endpoint = (result.endpoint or result.url)[:URL_SHOWN]
     record.ok, record.error, record.robots, record.changes = (
         result.ok,
         result.error,
@@ -100,7 +204,14 @@ def store_endpoint(url: str, graphs, vocab: identify.Vocabulary, user=None) -> E
     )
     record.finished_at = timezone.now()
     record.save()
-    audit.record(user, "register", url, ok=result.ok, robots=result.robots, error=result.error)
+    result.record_id = record.pk
+    try:  # stored first: a push that fails (Redis away) loses nothing
+        live.registration(
+            record.endpoint, "done" if result.ok else "failed", result.error, result.robots, ok=result.ok
+        )
+    except Exception:
+        log.warning("%s: could not push the registration's outcome", record.endpoint, exc_info=True)
+    audit.record(user, "register", record.endpoint, ok=result.ok, robots=result.robots, error=result.error)
     return result
 
 

@@ -96,3 +96,16 @@ def fresh_channel_layer():
     channel_layers.backends.clear()
     yield
     channel_layers.backends.clear()
+
+
+@pytest.fixture
+def seeded_ontology(transactional_db):
+    """The interpreter's seed terms (a transactional test before this one flushed the migration's rows)."""
+    import importlib
+
+    from django.apps import apps
+
+    from interpreter import versions
+
+    importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
+    versions.bump_ontology()

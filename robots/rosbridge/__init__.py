@@ -2,6 +2,8 @@
 
 from robots.rosbridge.client import ActionGoal, RosbridgeClient, Subscription
 from robots.rosbridge.errors import (
+    BadFrame,
+    FrameTooLarge,
     LinkDown,
     NotRosbridgeError,
     RosbridgeError,
@@ -12,6 +14,8 @@ from robots.rosbridge.errors import (
 
 __all__ = [
     "ActionGoal",
+    "BadFrame",
+    "FrameTooLarge",
     "LinkDown",
     "NotRosbridgeError",
     "RosbridgeClient",

@@ -20,8 +20,11 @@ from dataclasses import dataclass, field
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus, InvalidURI
 
+from robots import limits
 from robots.rosbridge import codec
 from robots.rosbridge.errors import (
+    BadFrame,
+    FrameTooLarge,
     LinkDown,
     NotRosbridgeError,
     RosbridgeError,
@@ -31,6 +34,11 @@ from robots.rosbridge.errors import (
 )
 
 log = logging.getLogger("robots.rosbridge")
+STABLE = 2.0  # s: a connection that lasted less is a flap, and the next attempt waits out the backoff
+LOGGED_DROPS = 10  # bad frames logged one by one per client; after that one line per thousand
+CLOSE_NOT_ROSBRIDGE = 1003  # WebSocket close code "unsupported data"
+# Frames read ahead of the reader (websockets' default): memory is bounded by MAX_QUEUE x the frame limit.
+MAX_QUEUE = 16
 
 
 @dataclass(eq=False)
@@ -85,19 +93,24 @@ class RosbridgeClient:
         ping_interval: float | None = 5.0,
         min_backoff: float = 0.1,
         max_backoff: float = 1.6,
+        max_frame_bytes: int | None = None,
     ) -> None:
         self.url = url
+        self.max_frame_bytes = max_frame_bytes or limits.current().frame_bytes
         self.connect_timeout, self.call_timeout = connect_timeout, call_timeout
         self.reconnect, self.ping_interval = reconnect, ping_interval
         self.min_backoff, self.max_backoff = min_backoff, max_backoff
         self.last_error = ""
+        # True once a rosbridge op arrived (even a bad one): something that speaks rosbridge is there
+        self.answered = False
         self._ws: ClientConnection | None = None
         self._ids = codec.Ids()
         self._calls: dict[str, asyncio.Future] = {}
         self._goals: dict[str, ActionGoal] = {}
         self._topics: dict[str, list[Subscription]] = {}
         self._adverts: dict[str, dict] = {}
-        self._fragments = codec.Fragments()
+        self._fragments = codec.Fragments(self.max_frame_bytes)
+        self._dropped = 0
         self._link_callbacks: list[Callable[[bool, str], None]] = []
         self._up: bool | None = None
         self._garbage: NotRosbridgeError | None = None
@@ -125,6 +138,7 @@ class RosbridgeClient:
         """Open the WebSocket once; raise a RosbridgeError with a one-line reason."""
         ws = await self._open()
         self._ws, self._garbage = ws, None
+        self._fragments = codec.Fragments(self.max_frame_bytes)
         self._reader = asyncio.create_task(self._read(ws))
         for message in [
             *self._adverts.values(),
@@ -149,10 +163,11 @@ class RosbridgeClient:
     async def close(self) -> None:
         """Close for good: stop reconnecting, fail whatever waits."""
         self._closing = True
+        # Taken first: cancelling the supervisor cancels the reader, which forgets the socket it read.
+        ws, self._ws = self._ws, None
         if self._supervisor is not None:
             self._supervisor.cancel()
             await _ended(self._supervisor)
-        ws, self._ws = self._ws, None
         if ws is not None:
             await ws.close()
         if self._reader is not None:
@@ -173,13 +188,13 @@ class RosbridgeClient:
                 open_timeout=self.connect_timeout,
                 compression=None,
                 proxy=None,
-                max_size=None,
-                max_queue=None,
+                max_size=self.max_frame_bytes,
+                max_queue=MAX_QUEUE,
                 ping_interval=self.ping_interval,
                 ping_timeout=self.ping_interval,
                 close_timeout=1.0,
             )
-        except InvalidURI:
+        except (InvalidURI, ValueError):  # ValueError: a port outside 0-65535
             raise RosbridgeError(f"{self.url}: not a WebSocket URL (expected ws://host:port)") from None
         except InvalidStatus as exc:
             status = exc.response.status_code
@@ -196,30 +211,55 @@ class RosbridgeClient:
             raise UnreachableError(f"{self.url}: unreachable ({_os_reason(exc)})") from None
 
     async def _supervise(self) -> None:
+        """Connect, wait for the link to drop, reconnect; nothing one endpoint does ends this loop."""
+        loop = asyncio.get_running_loop()
         delay = self.min_backoff
         while not self._closing:
             try:
                 await self.connect()
-            except RosbridgeError as exc:
-                self.last_error = str(exc)
-                self._set_link(False, str(exc))
+            except Exception as exc:  # a RosbridgeError, or anything else an endpoint made us raise
+                self.last_error = str(exc) if isinstance(exc, RosbridgeError) else f"{self.url}: {exc!r}"
+                if not isinstance(exc, RosbridgeError):
+                    log.exception("%s: connect failed unexpectedly", self.url)
+                self._set_link(False, self.last_error)
                 await asyncio.sleep(delay)
                 delay = min(delay * 2, self.max_backoff)
                 continue
-            delay = self.min_backoff
+            started = loop.time()
             await _ended(self._reader)  # a reader cancelled alone is a drop like any other: reconnect
+            if loop.time() - started >= STABLE:
+                delay = self.min_backoff
+            elif not self._closing:  # a link that drops at once (a hostile endpoint) must not spin
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, self.max_backoff)
 
     async def _read(self, ws: ClientConnection) -> None:
-        reason = "connection closed"
+        """Hand each frame to _dispatch; one frame can end the link (garbage, oversize), never the reader's loop."""
+        reason, error_type = "connection closed", LinkDown
         try:
             async for raw in ws:
-                self._dispatch(raw)
+                try:
+                    self._dispatch(raw)
+                except NotRosbridgeError as exc:
+                    if not self.reconnect:  # a one-shot client (registration): refuse what follows
+                        self._garbage = exc
+                        self._fail_waiting(exc)
+                        continue
+                    log.warning("%s; closing the link to reconnect", exc)
+                    reason = "it sent a frame that is not rosbridge"
+                    await ws.close(CLOSE_NOT_ROSBRIDGE, "not rosbridge")
+                    break
+                except Exception:
+                    log.exception("%s: a frame broke its handler; dropped", self.url)
         except ConnectionClosed as exc:
-            reason = f"connection lost ({exc.rcvd.code if exc.rcvd else 'no close frame'})"
+            reason, error_type = _closed_reason(exc, self.max_frame_bytes)
+        except Exception as exc:
+            log.exception("%s: the reader failed", self.url)
+            reason = f"reader failed ({exc!r})"
         finally:
             if self._ws is ws:
                 self._ws = None
-            self._fail_waiting(LinkDown(f"{self.url}: {reason}"))
+            self._fail_waiting(error_type(f"{self.url}: {reason}"))
             if not self._closing:
                 self._set_link(False, reason)
 
@@ -241,51 +281,71 @@ class RosbridgeClient:
 
     # ----- incoming -----
     def _dispatch(self, raw: str | bytes) -> None:
+        """Route one frame by its op; a frame whose fields are wrong is dropped, failing at most its own call."""
         try:
             message = codec.decode(raw)
         except NotRosbridgeError as exc:
-            self._garbage = NotRosbridgeError(f"{self.url}: not a rosbridge server ({exc})")
-            self._fail_waiting(self._garbage)
-            return
+            raise NotRosbridgeError(f"{self.url}: not a rosbridge server ({exc})") from None
         handler = self._handlers.get(message["op"])
-        if handler is not None:
-            handler(message)
+        if handler is None:
+            return
+        self.answered = True
+        try:
+            handler(codec.check(message))
+        except BadFrame as exc:
+            self._drop(message, exc)
+
+    def _drop(self, message: dict, exc: RosbridgeError) -> None:
+        """Log a bad frame (the first few, then one line per thousand) and fail the call it answers, if any."""
+        self._dropped += 1
+        if self._dropped <= LOGGED_DROPS or self._dropped % 1000 == 0:
+            log.warning("%s: dropped a bad frame (%s); %d so far", self.url, exc, self._dropped)
+        key = message.get("id")
+        waiting = self._calls.get(key) if isinstance(key, str) else None
+        if waiting is not None and not waiting.done():
+            waiting.set_exception(type(exc)(f"{self.url}: answered a bad frame ({exc})"))
 
     def _on_publish(self, message: dict) -> None:
-        for sub in self._topics.get(message.get("topic"), ()):
+        for sub in self._topics.get(message["topic"], ()):
             try:
-                sub.callback(message.get("msg", {}))
+                sub.callback(message["msg"])
             except Exception:
                 log.exception("%s: callback for %s failed", self.url, sub.topic)
 
     def _on_service_response(self, message: dict) -> None:
-        fut = self._calls.get(message.get("id"))
+        fut = self._calls.get(message["id"])
         if fut is None or fut.done():
             return
         values = message.get("values")
         if message.get("result") is False:
-            fut.set_exception(ServiceError(str(values)))
+            fut.set_exception(ServiceError(codec.clip(values)))
         else:
             fut.set_result(values if isinstance(values, dict) else {})
 
     def _on_action_feedback(self, message: dict) -> None:
-        goal = self._goals.get(message.get("id"))
-        if goal is not None and goal.on_feedback is not None:
+        goal = self._goals.get(message["id"])
+        if goal is None or goal.on_feedback is None:
+            return
+        try:
             goal.on_feedback(message.get("values", {}))
+        except Exception:
+            log.exception("%s: feedback callback for %s failed", self.url, goal.action)
 
     def _on_action_result(self, message: dict) -> None:
-        goal = self._goals.pop(message.get("id"), None)
+        goal = self._goals.pop(message["id"], None)
         if goal is None or goal.result.done():
             return
         if message.get("result") is False:
-            goal.result.set_exception(ServiceError(str(message.get("values"))))
+            goal.result.set_exception(ServiceError(codec.clip(message.get("values"))))
         else:
             goal.result.set_result({"status": message.get("status"), "values": message.get("values", {})})
 
     def _on_fragment(self, message: dict) -> None:
+        """Reassemble; a message too large for the frame limit fails the call it answers (same id)."""
         try:
             whole = self._fragments.add(message)
-        except NotRosbridgeError:
+        except FrameTooLarge as exc:
+            self._drop(message, exc)
             return
         if whole is not None:
             self._dispatch(codec.encode(whole))
@@ -308,12 +368,18 @@ class RosbridgeClient:
         fut = asyncio.get_running_loop().create_future()
         self._calls[message["id"]] = fut
         limit = self.call_timeout if timeout is None else timeout
+        dropped = self._dropped
         try:
             await self._send(message)
             return await asyncio.wait_for(fut, limit)
         except TimeoutError as exc:
             if isinstance(exc, RosbridgeError):
                 raise
+            if self._dropped > dropped:  # it did answer, with frames we could not use (logged)
+                raise RosbridgeTimeout(
+                    f"{self.url}: only bad frames within {limit:g} s of calling {name} "
+                    f"({self._dropped - dropped} dropped)"
+                ) from None
             raise RosbridgeTimeout(f"{self.url}: no answer to {name} within {limit:g} s") from None
         finally:
             self._calls.pop(message["id"], None)
@@ -382,10 +448,26 @@ class RosbridgeClient:
         await self._send(codec.cancel_action_goal(goal.id, goal.action))
 
 
+def _closed_reason(exc: ConnectionClosed, max_frame_bytes: int) -> tuple[str, type[LinkDown]]:
+    """Why a connection closed, in words; a frame over our limit (we closed with 1009) is FrameTooLarge."""
+    if exc.sent is not None and exc.sent.code == 1009:
+        return (
+            f"it sent a frame larger than the {limits.megabytes(max_frame_bytes)} limit "
+            f"({limits.FRAME_SETTING}); link closed",
+            FrameTooLarge,
+        )
+    return f"connection lost ({exc.rcvd.code if exc.rcvd else 'no close frame'})", LinkDown
+
+
 async def _ended(task: asyncio.Task) -> None:
-    """Wait for task to end, its cancellation included; but if the caller is the one cancelled, that goes on."""
+    """Wait for task to end, its cancellation included; but if the caller is the one cancelled, that goes on.
+
+    An error the task ended with is logged, never re-raised: a link's supervisor outlives any one reader.
+    """
     try:
         await task
     except asyncio.CancelledError:
         if asyncio.current_task().cancelling():
             raise  # the caller is cancelled (a close, or its loop shutting down)
+    except Exception:
+        log.exception("%s ended with an error", task.get_name())

@@ -21,5 +21,13 @@ class LinkDown(RosbridgeError):
     """The connection closed while a request was waiting or before it was sent."""
 
 
+class FrameTooLarge(LinkDown):
+    """The server sent a frame (or fragmented message) above the frame limit; the link was closed."""
+
+
+class BadFrame(RosbridgeError):
+    """One frame with a field of the wrong type or size: dropped (logged), the link goes on."""
+
+
 class ServiceError(RosbridgeError):
     """A service call (or action goal) the server answered with `result: false`; str() is its text."""

@@ -4,7 +4,10 @@ import { request, toast } from "./api.js";
 const TYPE_NAMES = { I: "plain", II: "synonym", III: "semantic issue", IV: "synonym and semantic issue", V: "not programmed" };
 
 export class Console {
-  constructor(form, parseBox, progress) {
+  // live: the page's socket (connectLive), when it has one: typed instructions go over it, so a typed "stop"
+  // leaves as fast as the STOP button; without one (or while it is down) they go to the API.
+  constructor(form, parseBox, progress, live = null) {
+    this.live = live;
     this.form = form;
     this.input = form ? form.querySelector("#instruction") : null;
     this.parseBox = parseBox;
@@ -21,7 +24,7 @@ export class Console {
   async send(body) {
     const text = body.text;
     try {
-      const instruction = await request("/api/instructions", body);
+      const instruction = await this.deliver(body);
       this.showParse(instruction);
       this.track(instruction);
       if (this.input && this.input.value.trim() === text) this.input.value = "";
@@ -30,6 +33,16 @@ export class Console {
       toast(`Instruction refused: ${error.message}`, true);
       return null;
     }
+  }
+
+  async deliver(body) {
+    if (this.live && this.live.open && body.text) {
+      const reply = await this.live.request({ command: "instruct", text: body.text, answer_to: body.answer_to ?? null });
+      if (reply === null) throw new Error("no answer yet over the live connection (see History before sending again)");
+      if (!reply.ok) throw new Error(reply.detail);
+      return reply.instruction;
+    }
+    return request("/api/instructions", body);
   }
 
   showParse(instruction) {

@@ -42,7 +42,7 @@ document.querySelectorAll("button[data-selected]").forEach((button) => button.ad
 const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, sendSelected) : null;
 document.querySelectorAll("button.goto").forEach((button) => button.addEventListener("click", () => sendSelected({ id: button.dataset.locationId, name: button.dataset.location })));
 
-connectLive("/ws/fleet/", {
+console_.live = connectLive("/ws/fleet/", {
   snapshot(message) {
     table.load(message.robots);
     if (map) map.setRobots(message.robots);

@@ -5,6 +5,8 @@ export function connectLive(path, handlers) {
   let socket = null;
   let delay = 500;
   const pending = [];
+  const waiting = new Map(); // ref -> resolve, for request()
+  let nextRef = 1;
 
   function status(state, text) {
     if (!conn) return;
@@ -22,6 +24,10 @@ export function connectLive(path, handlers) {
     });
     socket.addEventListener("message", (event) => {
       const message = JSON.parse(event.data);
+      if (message.type === "command.result" && waiting.has(message.ref)) {
+        waiting.get(message.ref)(message);
+        waiting.delete(message.ref);
+      }
       const handler = handlers[message.type];
       if (handler) handler(message);
     });
@@ -40,6 +46,16 @@ export function connectLive(path, handlers) {
       const text = JSON.stringify(message);
       if (socket && socket.readyState === WebSocket.OPEN) socket.send(text);
       else pending.push(text);
+    },
+    get open() { return Boolean(socket && socket.readyState === WebSocket.OPEN); },
+    // A command whose answer (its command.result) is awaited: null if none came within timeoutMs.
+    request(message, timeoutMs = 15000) {
+      const ref = `r${nextRef++}`;
+      return new Promise((resolve) => {
+        waiting.set(ref, resolve);
+        setTimeout(() => { if (waiting.delete(ref)) resolve(null); }, timeoutMs);
+        this.send({ ...message, ref });
+      });
     },
   };
 }

@@ -75,19 +75,6 @@ def table12_world(exec_settings, transactional_db):
 
 
 @pytest.fixture
-def seeded_ontology(transactional_db):
-    """The interpreter's seed terms (a transactional test before this one flushed the migration's rows)."""
-    import importlib
-
-    from django.apps import apps
-
-    from interpreter import versions
-
-    importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
-    versions.bump_ontology()
-
-
-@pytest.fixture
 def pose_stream(demo_world):
     """What the links process does for poses: every robot's odometry into the one store of last poses."""
     import asyncio

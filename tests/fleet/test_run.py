@@ -1,9 +1,14 @@
-"""`make run`'s last words: the URL and the login, said once the portal answers (after the workers' start-up)."""
+"""`make run`: its last words (the URL and the login, once the portal answers) and what it supervises, how."""
 
+import configparser
+import io
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
-from fleet.run import announcement
+from supervisor.options import ServerOptions
+
+from fleet.run import BASE_DIR, Setup, announcement, programs
+from fleet.supervision import START_RETRIES, Layout, LogRelay, render_config, supervisor_line
 from simworker.testing import free_port
 
 
@@ -32,3 +37,129 @@ def test_a_portal_that_never_answers_is_said_too():
     url = f"http://127.0.0.1:{free_port()}/"
     said = announcement(url, "login: admin / secret", timeout=1)
     assert f"did not answer at {url} within 1 s" in said and "secret" not in said
+
+
+# ----- what `make run` supervises, and how -----
+
+
+def _setup(tmp_path, redis_url=None) -> Setup:
+    return Setup(port=8123, sim_port_base=9100, var_dir=tmp_path, world="paper", redis_url=redis_url)
+
+
+def _parsed(tmp_path, setup: Setup) -> dict:
+    """The configuration as supervisord itself reads it: group name → its programs' configs."""
+    layout = Layout(tmp_path)
+    layout.log_dir.mkdir(exist_ok=True)
+    layout.config.write_text(render_config(programs(setup), layout, BASE_DIR))
+    options = ServerOptions()
+    options.realize(args=["-c", str(layout.config)])
+    return {group.name: group for group in options.process_group_configs}
+
+
+def test_the_embedded_redis_starts_with_the_supervisor_and_before_the_rest(tmp_path):
+    groups = _parsed(tmp_path, _setup(tmp_path))
+    (redis,) = groups["redis"].process_configs
+    assert redis.autostart and groups["redis"].priority < groups["fleet"].priority
+    assert redis.command.endswith(f"fleet.embedded_redis serve --socket {tmp_path / 'redis.sock'}")
+    assert not any(program.autostart for program in groups["fleet"].process_configs)  # after the migration
+
+
+def test_with_redis_url_set_no_embedded_redis_runs(tmp_path):
+    groups = _parsed(tmp_path, _setup(tmp_path, redis_url="redis://127.0.0.1:6379/3"))
+    assert set(groups) == {"fleet"}
+    assert _setup(tmp_path, "redis://127.0.0.1:6379/3").env()["REDIS_URL"] == "redis://127.0.0.1:6379/3"
+
+
+def test_every_process_is_restarted_with_backoff_and_reads_its_ports_from_the_setup(tmp_path):
+    programs_by_name = {p.name: p for p in _parsed(tmp_path, _setup(tmp_path))["fleet"].process_configs}
+    assert set(programs_by_name) == {"web", "worker", "control", "sim", "links", "scheduler"}
+    for program in programs_by_name.values():
+        assert program.autorestart and program.startretries == START_RETRIES
+        assert program.stdout_logfile == str(tmp_path / "log" / f"{program.name}.log")
+    assert "--port 8123" in programs_by_name["web"].command
+    assert "--port-base 9100" in programs_by_name["sim"].command
+    assert "--port-base 9100" in programs_by_name["links"].command
+    assert "-n instructions@%h" in programs_by_name["worker"].command  # supervisord's %% read back as %
+
+
+def test_the_setup_comes_from_the_environment(tmp_path):
+    environ = {"FLEET_PORT": "8400", "FLEET_SIM_PORT_BASE": "9500", "FLEET_VAR_DIR": str(tmp_path)}
+    setup = Setup.from_env(environ)
+    assert (setup.port, setup.sim_port_base, setup.var_dir, setup.redis_url) == (8400, 9500, tmp_path, None)
+    assert setup.env()["REDIS_URL"] == f"unix://{tmp_path / 'redis.sock'}"
+
+
+def test_the_terminal_hears_of_a_death_and_of_giving_up_but_not_of_every_start():
+    said = [
+        "2026-11-23 23:16:39,933 WARN exited: worker (terminated by SIGKILL; not expected)",
+        "2026-11-23 23:16:39,940 INFO spawned: 'worker' with pid 26826",
+        "2026-11-23 23:16:43,000 INFO success: worker entered RUNNING state, process has stayed up for > than 3 seconds",
+        "2026-11-23 23:17:00,000 INFO gave up: sim entered FATAL state, too many start retries too quickly",
+        "2026-11-23 23:15:17,828 CRIT Supervisor is running as root.  Privileges were not dropped",
+        "a line that is no log line",
+    ]
+    assert [supervisor_line(line) for line in said] == [
+        "exited: worker (terminated by SIGKILL; not expected)",
+        None,
+        None,
+        "gave up: sim entered FATAL state, too many start retries too quickly",
+        None,
+        None,
+    ]
+
+
+def test_the_relay_prints_only_new_lines_with_the_name_and_follows_a_rotation(tmp_path):
+    layout = Layout(tmp_path)
+    layout.log_dir.mkdir()
+    layout.log("web").write_text("from an earlier run\n")
+    out = io.StringIO()
+    relay = LogRelay(layout, ["web", "sim"], out=out)
+    with layout.log("web").open("a") as log:
+        log.write("listening\nhalf a li")
+    relay.flush()
+    layout.log("web").rename(layout.log("web").with_suffix(".log.1"))  # supervisord rotates: rename, new file
+    layout.log("web").write_text("after the rotation\n")
+    with layout.log("web").with_suffix(".log.1").open("a") as old:
+        old.write("ne\n")
+    relay.flush()
+    relay.flush()
+    layout.log("sim").write_text("sim started\n")
+    relay.flush()
+    lines = [line.split(" ", 1)[1] for line in out.getvalue().splitlines()]  # without the time
+    assert lines == [
+        "web        | listening",
+        "web        | half a line",
+        "web        | after the rotation",
+        "sim        | sim started",
+    ]
+
+
+# ----- production: deploy/ has one unit and one supervisord program per role -----
+
+ROLES = {"web", "worker", "control", "links", "scheduler", "sim"}
+
+
+def _ini(path) -> configparser.ConfigParser:
+    parser = configparser.ConfigParser(interpolation=None)
+    parser.optionxform = str  # systemd's keys are case-sensitive
+    parser.read(path)
+    return parser
+
+
+def test_every_role_has_a_systemd_unit_that_always_restarts_it():
+    for role in ROLES:
+        service = _ini(BASE_DIR / "deploy" / "systemd" / f"fleet-{role}.service")["Service"]
+        assert service["Restart"] == "always" and float(service["RestartSec"]) > 0, role
+        assert service["ExecStart"].startswith("/opt/fleet/.venv/bin/python "), role
+    target = _ini(BASE_DIR / "deploy" / "systemd" / "fleet.target")["Unit"]["Wants"].split()
+    assert set(target) == {f"fleet-{role}.service" for role in ROLES - {"sim"}}  # the simulator: on request
+
+
+def test_the_single_host_supervisord_config_restarts_every_role():
+    config = _ini(BASE_DIR / "deploy" / "supervisord.conf")
+    programs_by_role = {
+        section.split(":")[1]: config[section] for section in config if section.startswith("program:")
+    }
+    assert set(programs_by_role) == ROLES
+    for role, program in programs_by_role.items():
+        assert program["autorestart"] == "true" and int(program["startretries"]) >= 100, role

@@ -187,7 +187,7 @@ def recorded_control(monkeypatch):
     import importlib
     import sys
 
-    import fleet
+    import execution
 
     real = importlib.import_module("execution.control")
     calls = []
@@ -216,7 +216,7 @@ def recorded_control(monkeypatch):
             return None
 
     monkeypatch.setitem(sys.modules, "execution.control", Control)
-    monkeypatch.setattr(fleet, "control", Control, raising=False)
+    monkeypatch.setattr(execution, "control", Control, raising=False)
     return calls
 
 

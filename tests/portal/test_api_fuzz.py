@@ -46,11 +46,11 @@ def recorded_registration(monkeypatch):
     calls = []
 
     class Registration:
-        def __call__(self, urls, user_id):
+        def __call__(self, urls, user_id, record_ids=None):
             calls.append(urls)
             return []
 
-        def delay(self, urls, user_id):
+        def delay(self, urls, user_id, record_ids=None):
             calls.append(urls)
             return type("Queued", (), {"id": "recorded"})()
 

@@ -163,10 +163,10 @@ def test_nobody_adds_changes_or_deletes_audit_entries_in_the_admin(client, membe
     entry = audit.record(members[ADMIN], "test.entry", "something")
     superuser = User.objects.create_superuser("root", password="x" * 12)
     client.force_login(superuser)
-    assert client.get("/admin/fleet/auditentry/").status_code == 200
-    assert client.get("/admin/fleet/auditentry/add/").status_code == 403
-    assert client.post(f"/admin/fleet/auditentry/{entry.pk}/delete/", {"post": "yes"}).status_code == 403
-    client.post(f"/admin/fleet/auditentry/{entry.pk}/change/", {"action": "rewritten"})
+    assert client.get("/admin/audit/auditentry/").status_code == 200
+    assert client.get("/admin/audit/auditentry/add/").status_code == 403
+    assert client.post(f"/admin/audit/auditentry/{entry.pk}/delete/", {"post": "yes"}).status_code == 403
+    client.post(f"/admin/audit/auditentry/{entry.pk}/change/", {"action": "rewritten"})
     entry.refresh_from_db()
     assert entry.action == "test.entry"
 
@@ -196,6 +196,7 @@ def _api_url(path: str, world) -> str:
     values = {
         "slot_id": world["slot"].pk,
         "instruction_id": 1,
+        "record_id": 1,
         "name": world["robot"].name,
         "action": "odometry",
         "alert_id": 1,
@@ -298,6 +299,7 @@ def _message(command: str, robot_id: int) -> dict:
     examples = {
         "stop": {"command": "stop", "robots": [robot_id]},
         "teleop": {"command": "teleop", "robot": robot_id, "linear": 0.1, "angular": 0.0},
+        "instruct": {"command": "instruct", "text": "flurble"},  # asked back (type V): nothing is dispatched
     }
     return {**examples[command], "ref": command}
 

@@ -305,6 +305,26 @@ async def test_a_stop_publishes_zero_before_any_database_work(operator, fleet, r
     await communicator.disconnect()
 
 
+async def test_a_typed_stop_over_the_socket_publishes_zero_before_the_instruction_is_stored(
+    operator, fleet, recorded, seeded_ontology
+):
+    """The console sends typed text over the page socket: a "stop husky" leaves like the STOP button (the zero
+    first, from the loop; then submit stores it and control.stop stops again and answers)."""
+    from execution import fast_stop
+
+    communicator = await _connect("/ws/fleet/", operator)
+    await communicator.receive_json_from(timeout=5)
+    await fast_stop.TARGETS._load()
+    await communicator.send_json_to({"command": "instruct", "text": "stop husky", "ref": "t1"})
+    reply = await communicator.receive_json_from(timeout=10)
+    while reply.get("type") != "command.result":
+        reply = await communicator.receive_json_from(timeout=10)
+    assert reply["ok"] is True and reply["ref"] == "t1", reply
+    assert reply["instruction"]["text"] == "stop husky" and reply["instruction"]["status"] == "succeeded"
+    assert recorded[0] == ("published", "/cmd_vel", 0.0) and ("control.stop", ["husky"]) in recorded
+    await communicator.disconnect()
+
+
 async def test_a_viewer_stop_publishes_nothing(viewer, fleet, recorded):
     from execution import fast_stop
 

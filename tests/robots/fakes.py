@@ -1,4 +1,5 @@
-"""Endpoints for the registration tests: a graph-only rosbridge server and servers that are not rosbridge.
+"""Endpoints for the registration tests: a graph-only rosbridge server, servers that are not rosbridge, and a
+hostile one (HostileEndpoint) whose every rosapi reply and frame a test chooses.
 
 GraphEndpoint serves a hand-built ROS graph through simworker's rosbridge server and rosapi (so the wire
 behaviour is the simulator's, which follows rosbridge_suite), without physics; tests mutate its graph,
@@ -10,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import json
 import threading
 import time
 
@@ -184,3 +186,149 @@ class HttpServer:
 
         self.thread.run(stop())
         self.thread.close()
+
+
+# ----- a hostile endpoint -----
+HOSTILE_URDF = '<robot name="{name}"><link name="base_link"/>{joints}{padding}</robot>'
+WHEELS = "".join(
+    f'<joint name="wheel_{i}_joint" type="continuous"><parent link="base_link"/><child link="wheel_{i}"/></joint>'
+    for i in range(2)
+)
+
+
+def hostile_urdf(name: str = "hostile", size: int = 0) -> str:
+    """A two-wheeled robot's URDF, padded with an XML comment to about `size` characters."""
+    padding = f"<!--{'x' * size}-->" if size else ""
+    return HOSTILE_URDF.format(name=name, joints=WHEELS, padding=padding)
+
+
+def answer(values: dict, result: bool = True):
+    """A reply: the well-formed service_response with these values."""
+
+    def frames(call: dict) -> list:
+        return [json.dumps({"op": "service_response", "id": call["id"], "service": call["service"],
+                            "values": values, "result": result})]  # fmt: skip
+
+    return frames
+
+
+def frames(*raw):
+    """A reply: these frames as they are (text or bytes), whatever was asked."""
+    return lambda call: list(raw)
+
+
+def with_id(make):
+    """A reply built from the call's id: make(id) gives one frame as a dict, sent as JSON."""
+    return lambda call: [json.dumps(make(call["id"]))]
+
+
+def fragmented(values: dict, parts: int = 3, total=None):
+    """A reply: the service_response cut into `fragment` ops with the call's id (total as given, if given)."""
+
+    def make(call: dict) -> list:
+        text = answer(values)(call)[0]
+        size = -(-len(text) // parts)
+        chunks = [text[i : i + size] for i in range(0, len(text), size)]
+        count = len(chunks) if total is None else total
+        return [json.dumps({"op": "fragment", "id": call["id"], "data": chunk, "num": n, "total": count})
+                for n, chunk in enumerate(chunks)]  # fmt: skip
+
+    return make
+
+
+def robot_replies(name: str = "hostile", urdf: str | None = None, topics: int = 0) -> dict:
+    """What rosapi answers for one small ROS 1 robot (cmd_vel, odom, a URDF), plus `topics` extra topics."""
+    extra = [f"/extra_{i}" for i in range(topics)]
+    types = ["geometry_msgs/Twist", "nav_msgs/Odometry"] + ["std_msgs/Bool"] * topics
+    return {
+        "/rosapi/topics": answer({"topics": ["/cmd_vel", "/odom", *extra], "types": types}),
+        "/rosapi/nodes": answer({"nodes": ["/base"]}),
+        "/rosapi/node_details": answer(
+            {"publishing": ["/odom"], "subscribing": ["/cmd_vel"], "services": []}
+        ),
+        "/rosapi/services": answer({"services": []}),
+        "/rosapi/get_param_names": answer({"names": ["/robot_description"]}),
+        "/rosapi/get_param": answer({"value": json.dumps(urdf if urdf is not None else hostile_urdf(name))}),
+        "/rosapi/action_servers": answer({"action_servers": []}),
+    }
+
+
+class HostileEndpoint:
+    """A rosbridge endpoint that lies: rosapi answers from `replies`, and any frame is sent on demand.
+
+    A reply is a function of the call message giving the frames to send (see answer, frames, with_id,
+    fragmented); the defaults describe one small robot (robot_replies), so a test overrides only the reply it
+    is about. Services not in the table fail as rosbridge says ("Service ... does not exist"). send() pushes a
+    frame to every client; subscriptions are recorded, so publish() reaches the topics clients asked for.
+    """
+
+    def __init__(
+        self, name: str = "hostile", urdf: str | None = None, extra_topics: int = 0, **replies
+    ) -> None:
+        self.replies = {
+            **robot_replies(name, urdf, extra_topics),
+            **{_service(k): v for k, v in replies.items()},
+        }
+        self.port = free_port()
+        self.thread = LoopThread()
+        self.clients: set = set()
+        self.connections = 0
+        self.subscribed: set[str] = set()
+        self._server = None
+
+    @property
+    def url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}"
+
+    async def _handle(self, ws) -> None:
+        self.clients.add(ws)
+        self.connections += 1
+        try:
+            async for raw in ws:
+                await self._on(ws, json.loads(raw))
+        except Exception:
+            pass  # a client that went away mid-send
+        finally:
+            self.clients.discard(ws)
+
+    async def _on(self, ws, message: dict) -> None:
+        if message.get("op") == "subscribe":
+            self.subscribed.add(message["topic"])
+        if message.get("op") != "call_service":
+            return
+        missing = answer(f"Service {message['service']} does not exist", result=False)
+        for frame in self.replies.get(message["service"], missing)(message):
+            await ws.send(frame)
+
+    def send(self, frame) -> None:
+        """Send one frame (text or bytes) to every connected client."""
+
+        async def send_all():
+            for ws in list(self.clients):
+                with contextlib.suppress(Exception):
+                    await ws.send(frame)
+
+        self.thread.run(send_all())
+
+    def publish(self, topic: str, msg: dict) -> None:
+        self.send(json.dumps({"op": "publish", "topic": topic, "msg": msg}))
+
+    def __enter__(self) -> HostileEndpoint:
+        async def start():
+            self._server = await serve(self._handle, "127.0.0.1", self.port, max_size=None, compression=None)
+
+        self.thread.run(start())
+        return self
+
+    def __exit__(self, *exc) -> None:
+        async def stop():
+            self._server.close()
+            await self._server.wait_closed()
+
+        self.thread.run(stop())
+        self.thread.close()
+
+
+def _service(key: str) -> str:
+    """Keyword arguments name rosapi services without the prefix: nodes= is /rosapi/nodes."""
+    return key if key.startswith("/") else f"/rosapi/{key}"

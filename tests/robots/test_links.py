@@ -127,3 +127,48 @@ async def test_links_stream_map_poses_to_the_portal(endpoint):
     finally:
         manager.stop()
         await asyncio.wait_for(asyncio.gather(*tasks), 10)
+
+
+async def test_a_link_outlives_bad_frames_and_reconnects_after_garbage():
+    """A publish with a list for a topic is dropped; a garbage frame takes the link down and it comes back."""
+    from tests.robots.fakes import HostileEndpoint
+
+    with HostileEndpoint() as hostile:
+        (result,) = await sync_to_async(register_endpoints)([hostile.url])
+        assert result.ok
+        seen = asyncio.Queue()
+
+        async def odom_hook(client, robots):
+            (robot,) = robots
+            await client.subscribe(*robot["bindings"]["odometry"], seen.put_nowait)
+
+        manager = LinkManager([hostile.url], hooks=[odom_hook])
+        task = asyncio.create_task(manager.run())
+        try:
+            for _ in range(100):  # the link is up: the hook's subscription reached the endpoint
+                if "/odom" in hostile.subscribed:
+                    break
+                await asyncio.sleep(0.05)
+            linked = hostile.connections  # registration's connection, and the link's
+            hostile.send('{"op": "publish", "topic": ["x"], "msg": {}}')
+            hostile.publish("/odom", {"n": 1})
+            assert await asyncio.wait_for(seen.get(), 5) == {"n": 1}
+            assert hostile.connections == linked  # a bad frame is dropped, the link stays as it was
+            hostile.send(b"\x00\xff not rosbridge")
+            for _ in range(200):
+                if hostile.connections == linked + 1 and (await status_of("hostile")) == Robot.Link.ONLINE:
+                    break
+                await asyncio.sleep(0.05)
+            assert hostile.connections == linked + 1
+            for _ in range(100):  # the subscription is renewed on the new connection
+                hostile.publish("/odom", {"n": 2})
+                try:
+                    assert await asyncio.wait_for(seen.get(), 0.1) == {"n": 2}
+                    break
+                except TimeoutError:
+                    continue
+            else:
+                raise AssertionError("no odometry after the reconnection")
+        finally:
+            manager.stop()
+            await asyncio.wait_for(task, 10)

@@ -76,12 +76,9 @@ def test_failing_endpoints_give_one_line_errors_while_the_others_register(endpoi
         results = register_endpoints([good.url, down, garbage.url, silent.url, http.url], call_timeout=0.5)
     by_url = {r.url: r for r in results}
     assert by_url[good.url].ok and by_url[good.url].robots == ["fakebot"]
-    assert "unreachable" in by_url[down].error
-    assert "not a rosbridge server" in by_url[garbage.url].error
-    assert "no answer to /rosapi/topics" in by_url[silent.url].error
-    assert "HTTP 200" in by_url[http.url].error
-    for result in results:
-        assert "\n" not in result.error
+    # closed port, garbage, silence and plain HTTP read alike: the errors never tell which ports are open
+    for url in (down, garbage.url, silent.url, http.url):
+        assert by_url[url].error == f"{url}: unreachable (no rosbridge server answered)"
     assert RegistrationRecord.objects.filter(ok=False).count() == 4
 
 

@@ -93,7 +93,7 @@ def test_decode_rejects_what_is_not_rosbridge():
 
 
 def test_fragments_reassemble_with_a_float_total():
-    frags = codec.Fragments()
+    frags = codec.Fragments(max_bytes=1_000_000)
     text = codec.encode({"op": "publish", "topic": "/map", "msg": {"data": list(range(20))}})
     parts = [text[i : i + 10] for i in range(0, len(text), 10)]
     total = (len(text) - 1) / 10 + 1  # rosbridge's true-division quirk

@@ -24,7 +24,7 @@ class Command(BaseCommand):
 
     def handle(self, *args, **opts):
         results = register_endpoints(opts["urls"], call_timeout=opts["timeout"])
-        names = [name for r in results for name in r.robots]
+        names = list(dict.fromkeys(name for r in results for name in r.robots))  # aliases name robots twice
         robots = Robot.objects.filter(name__in=names).prefetch_related("bindings")
         by_name = {r.name: r for r in robots}
         if opts["json"]:
@@ -34,7 +34,7 @@ class Command(BaseCommand):
         else:
             for result in results:
                 self._report(result, by_name)
-        for result in results:
+        for result in results:  # one line per endpoint refused, whatever the others did
             if not result.ok:
                 self.stderr.write(f"error: {result.error}")
         failed = [r for r in results if not r.ok]

@@ -8,8 +8,10 @@ import signal
 from asgiref.sync import sync_to_async
 from django.core.management.base import BaseCommand, CommandError
 
+from robots import endpoints
 from robots.links import LinkManager, battery_hook, wait_for_endpoints
-from robots.registration import discover_all, store_all
+from robots.registration import allow_list, discover_all, store_all
+from robots.rosbridge import RosbridgeError
 
 
 def world_endpoints(name: str, host: str, port_base: int) -> list[str]:
@@ -62,21 +64,34 @@ class Command(BaseCommand):
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, manager.stop)
         if urls:
-            await self.register(urls, wait, manager.stopping)
+            registered = await self.register(urls, wait, manager.stopping)
+            manager.fixed = registered if only else None
         self.stdout.write("robot links running (Ctrl-C to stop)")
         await asyncio.gather(manager.run(), hub.run(manager.stopping))
         self.stdout.write("robot links stopped")
 
-    async def register(self, urls: list[str], wait: float, stopping: asyncio.Event) -> None:
-        ready = await wait_for_endpoints(urls, wait, stopping)
+    async def register(self, urls: list[str], wait: float, stopping: asyncio.Event) -> list[str]:
+        """Check, wait for and register the endpoints; return the canonical URLs of those registered."""
+        allowed = await sync_to_async(allow_list)()
+        checked = []
         for url in urls:
+            try:
+                checked.append(await endpoints.resolve(url, allowed))
+            except RosbridgeError as exc:  # refused before anything connects
+                self.stderr.write(f"error: {exc}")
+        checked = list(dict.fromkeys(checked))
+        ready = await wait_for_endpoints(checked, wait, stopping)
+        for url in checked:
             if url not in ready:
                 self.stderr.write(f"error: {url}: did not answer within {wait:g} s; not registered")
         if not ready:
-            return
-        found = await discover_all(ready)
+            return []
+        found = await discover_all(ready, allowed=allowed)
+        registered = []
         for result in await sync_to_async(store_all)(ready, found):
             if result.ok:
+                registered.append(result.endpoint)
                 self.stdout.write(f"registered {result.url}: {', '.join(result.robots)}")
             else:
                 self.stderr.write(f"error: {result.error}")
+        return registered
