@@ -15,7 +15,15 @@ log = logging.getLogger(__name__)
 
 
 class AlertError(ValueError):
-    """An alert that cannot take this change (unknown, already resolved); the message says why."""
+    """An alert that cannot take this change; the message says why."""
+
+
+class UnknownAlert(AlertError):
+    """No alert has this id."""
+
+
+class AlertClosed(AlertError):
+    """The alert was resolved already: nothing more to acknowledge or resolve."""
 
 
 def raise_alert(kind: str, robot=None, message: str = "") -> Alert | None:
@@ -121,9 +129,9 @@ def as_dict(alert: Alert) -> dict:
 def _open_alert(alert_id: int) -> Alert:
     alert = Alert.objects.select_for_update().filter(pk=alert_id).first()
     if alert is None:
-        raise AlertError(f"alert {alert_id}: no such alert")
+        raise UnknownAlert(f"no alert has the id {alert_id}")
     if alert.resolved_at is not None:
-        raise AlertError(f"alert {alert_id} was already resolved ({alert.resolution})")
+        raise AlertClosed(f"alert {alert_id} was already resolved ({alert.resolution})")
     return alert
 
 

@@ -99,7 +99,7 @@ def test_operators_acknowledge_then_resolve_and_both_are_audited(client_for, ope
     )
     assert done.json()["status"] == "resolved" and done.json()["resolution"] == "worker restarted"
     again = client.post(f"/api/alerts/{alert.pk}/resolve", {}, content_type="application/json")
-    assert again.status_code == 409 and "already resolved" in again.json()["detail"]
+    assert again.status_code == 409 and again.json()["detail"].startswith("alert_id: alert")
     assert client.post("/api/alerts/99999/acknowledge").status_code == 404
     assert client.get("/api/alerts").json() == []
     assert [a["id"] for a in client.get("/api/alerts?status=resolved").json()] == [alert.pk]
