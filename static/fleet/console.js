@@ -37,7 +37,8 @@ export class Console {
 
   async deliver(body) {
     if (this.live && this.live.open && body.text) {
-      const reply = await this.live.request({ command: "instruct", text: body.text, answer_to: body.answer_to ?? null });
+      const message = { command: "instruct", text: body.text, answer_to: body.answer_to ?? null };
+      const reply = await this.live.request(message, 120000); // answered once stored and dispatched
       if (reply === null) throw new Error("no answer yet over the live connection (see History before sending again)");
       if (!reply.ok) throw new Error(reply.detail);
       return reply.instruction;

@@ -12,7 +12,8 @@ from fleetcore.steps import validate
 
 # (p50, p99, missing, moving, stops, answered_ms) per kind of stop: made up, no timing is asserted
 KINDS = {
-    "typed": (4.0, 9.0, 0, 20, 20, 80.0),
+    "typed_socket": (4.0, 9.0, 0, 20, 20, 80.0),
+    "typed": (14.0, 29.0, 0, 20, 20, 90.0),
     "typed_one": (3.5, 7.5, 0, 19, 20, 40.0),
     "socket": (2.0, 5.0, 0, 20, 20, None),
     "stop_all": (30.0, 60.0, 1, 20, 20, 70.0),
@@ -36,7 +37,7 @@ def kind(p50, p99, missing, moving, stops, answered):
 def synthetic(unreachable_p99=12.0):
     reachable = {name: kind(*values) for name, values in KINDS.items()}
     unreachable = {name: kind(*KINDS[name]) for name in typed_stop.UNREACHABLE_KINDS}
-    unreachable["typed"] = kind(5.0, unreachable_p99, 0, 20, 20, 2100.0)
+    unreachable["typed_socket"] = kind(5.0, unreachable_p99, 0, 20, 20, 2100.0)
     unreachable["typed"]["said"] = ['2x {"text": "stop"} -> HTTP 201 failed: unreachable1: cannot reach']
     for phase in (reachable, unreachable):
         phase["first_typed"] = kind(300.0, 310.0, 0, 0, 10, 320.0)
@@ -107,7 +108,10 @@ def test_the_report_section_shows_every_kind_with_and_without_the_unreachable_ro
     report.write_all({"typed_stop": synthetic()}, tmp_path, "quick")
     text = (tmp_path / "REPORT.md").read_text()
     assert "## Typed stop: the console against the STOP buttons (same run)" in text
-    assert f"| {typed_stop.KINDS['typed']} | 4.0 / 9.0 | 5.0 / 12.0 | 2.00 | 80.0 | 0 / 0 of 20 |" in text
+    assert (
+        f"| {typed_stop.KINDS['typed_socket']} | 4.0 / 9.0 | 5.0 / 12.0 | 2.00 | 80.0 | 0 / 0 of 20 |" in text
+    )
+    assert f"| {typed_stop.KINDS['typed']} | 14.0 / 29.0 | 14.0 / 29.0 | 7.00 | 90.0 | 0 / 0 of 20 |" in text
     assert f"| {typed_stop.KINDS['stop_all']} | 30.0 / 60.0 | – | 15.00 | 70.0 | 1 / 0 of 20 |" in text
     assert f"| {typed_stop.KINDS['typed_one']} | 3.5 / 7.5 | 3.5 / 7.5 | 1.75 | 40.0 | 0 / 1 of 20 |" in text
     assert "**met** (p99 9.0 ms; 12.0 ms with the unreachable robot)" in text

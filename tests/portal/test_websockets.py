@@ -280,9 +280,10 @@ def recorded(monkeypatch):
 
     class Control:
         @staticmethod
-        def stop(robots, user):
-            events.append(("control.stop", sorted(robot.name for robot in robots)))
-            return {robot.name: "stopped" for robot in robots}
+        def stop(robots, user, source="console"):
+            names = sorted(getattr(robot, "name", robot) for robot in robots)  # robots, or names (submit's)
+            events.append(("control.stop", names))
+            return dict.fromkeys(names, "stopped")
 
     monkeypatch.setitem(__import__("sys").modules, "execution.control", Control)
     monkeypatch.setattr(execution, "control", Control, raising=False)
@@ -308,20 +309,20 @@ async def test_a_stop_publishes_zero_before_any_database_work(operator, fleet, r
 async def test_a_typed_stop_over_the_socket_publishes_zero_before_the_instruction_is_stored(
     operator, fleet, recorded, seeded_ontology
 ):
-    """The console sends typed text over the page socket: a "stop husky" leaves like the STOP button (the zero
+    """The console sends typed text over the page socket: a "stop turtlebot" leaves like the STOP button (the zero
     first, from the loop; then submit stores it and control.stop stops again and answers)."""
     from execution import fast_stop
 
     communicator = await _connect("/ws/fleet/", operator)
     await communicator.receive_json_from(timeout=5)
     await fast_stop.TARGETS._load()
-    await communicator.send_json_to({"command": "instruct", "text": "stop husky", "ref": "t1"})
+    await communicator.send_json_to({"command": "instruct", "text": "stop turtlebot", "ref": "t1"})
     reply = await communicator.receive_json_from(timeout=10)
     while reply.get("type") != "command.result":
         reply = await communicator.receive_json_from(timeout=10)
     assert reply["ok"] is True and reply["ref"] == "t1", reply
-    assert reply["instruction"]["text"] == "stop husky" and reply["instruction"]["status"] == "succeeded"
-    assert recorded[0] == ("published", "/cmd_vel", 0.0) and ("control.stop", ["husky"]) in recorded
+    assert reply["instruction"]["text"] == "stop turtlebot" and reply["instruction"]["status"] == "succeeded"
+    assert recorded[0] == ("published", "/cmd_vel", 0.0) and ("control.stop", ["turtlebot"]) in recorded
     await communicator.disconnect()
 
 
