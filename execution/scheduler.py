@@ -4,6 +4,7 @@ One tick (every half second in `python manage.py scheduler`):
 1. the watchdog fails executions whose worker died (their robots get a zero velocity);
 2. robots with queued executions and no runner get a drain task;
 3. each enabled time slot that covers now and has not run today becomes an instruction (source "schedule");
+   instructions waiting for a free robot are allocated when one is free (execution.dispatch.retry);
 4. robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle in ready longer than
    FLEET_IDLE_TIMEOUT_SECONDS go offline (they wake on the next instruction).
 
@@ -22,7 +23,7 @@ from django.db import close_old_connections
 from django.db.models import Max
 from django.utils import timezone
 
-from execution import watchdog
+from execution import dispatch, watchdog
 from execution.models import TimeSlot
 from fleetcore.states import Event
 from robots.models import Robot
@@ -103,6 +104,7 @@ def tick(clock: Clock) -> dict:
     close_old_connections()
     report = {"recovered": watchdog.recover(), "kicked": watchdog.kick_stalled()}
     report["scheduled"] = [instruction.pk for instruction in run_due_slots(clock.now())]
+    report["allocated"] = dispatch.retry()  # instructions that waited for a free robot
     expire_idle(timezone.now())
     return report
 

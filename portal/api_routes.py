@@ -54,6 +54,9 @@ class TimeSlotIn(Schema):
 
 class InstructionIn(Schema):
     text: str = Field(min_length=1, max_length=2000)
+    robot_ids: list[int] | None = Field(
+        None, max_length=1000, description="robots selected on the page: a text naming no robot goes to them"
+    )
 
 
 class InstructionOut(Schema):
@@ -140,4 +143,4 @@ def create_instruction(request, payload: InstructionIn):
     require_perm(request, CONTROL_PERM)
     from execution.instructions import submit
 
-    return Status(201, submit(payload.text, request.user, source="api"))
+    return Status(201, submit(payload.text, request.user, source="api", robot_ids=payload.robot_ids))
