@@ -22,14 +22,15 @@ HOST, PORT = "127.0.0.1", int(os.environ.get("FLEET_PORT", "8000"))
 def processes(python: str) -> dict[str, str]:
     """The system's processes, each a shell command (honcho runs them and merges their output)."""
     manage = f"{python} manage.py"
+    world = os.environ.get("FLEET_WORLD", "paper")  # the simulated world (fleetcore/worlds/<name>)
     procs = {
         "web": f"{python} -m uvicorn fleet.asgi:application --host {HOST} --port {PORT} --log-level warning",
         # Instructions block while robots move, so that worker runs many threads; stops and registrations
         # have a worker of their own and never wait behind a long instruction.
         "worker": f"{python} -m celery -A fleet -q worker -n instructions@%h -Q instructions -P threads -c 32 -l warning",
         "control": f"{python} -m celery -A fleet -q worker -n control@%h -Q control,registration -c 1 -l warning",
-        "sim": f"{manage} simworker --world paper",
-        "links": f"{manage} robotlinks --register-world paper",
+        "sim": f"{manage} simworker --world {world}",
+        "links": f"{manage} robotlinks --register-world {world}",
         "scheduler": f"{manage} scheduler",  # time slots, lost workers, stalled robot queues (issue 6)
     }
     return procs
