@@ -11,15 +11,13 @@ import math
 import time
 
 import live
-from execution.route import route
-from execution.steps import Blocked, Session, drive, follow_goal, navigate, travel_time
+from execution import traffic
+from execution.steps import Blocked, Session, drive, follow_goal, travel_time
 from fleetcore import motion
 from fleetcore.states import Event
 from fleetcore.steps import Destination, Step, parse_task
 from robots.models import Robot
 
-WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
-BLOCKED_S = 2.0  # s commanded without moving: something unplanned is in the way
 REROUTES, BACK_OFF_S = 2, 1.0
 DOCK_LIMIT_S = 120.0
 
@@ -83,13 +81,11 @@ def _travel(session: Session, destination: Destination, factor: float) -> None:
         session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id
     )
     live.goal(session.robot, name, x, y)  # the map draws the goal until the robot is done with it
-    pose = session.pose()
     limits = session.link.limits()
-    distance = math.hypot(x - pose[0], y - pose[1])
     try:
         if session.link.nav_kind:
             nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
-            navigate(session, x, y, travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear))
+            traffic.travel(session, (x, y), limits, nav_speed / limits.linear, nav=True)  # goal by goal
         else:
             drive_route(session, (x, y), limits, factor)
     finally:
@@ -103,15 +99,8 @@ def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limi
     plans again from where it is, with the other robots' live poses, up to REROUTES times.
     """
     for attempt in range(REROUTES + 1):
-        pose = session.pose()
         try:
-            for x, y in route(session.robot, pose[:2], goal):
-                pose = session.pose()
-                last_leg = (x, y) == goal
-                tolerance = motion.TOLERANCE if last_leg else WAYPOINT_TOLERANCE
-                controller = motion.GoToGoal((x, y), limits, factor, tolerance)
-                limit = travel_time(math.hypot(x - pose[0], y - pose[1]), math.pi, limits, factor)
-                drive(session, controller, limit, blocked_s=BLOCKED_S)
+            traffic.travel(session, goal, limits, factor)  # reserved, then claimed stretch by stretch
             return
         except Blocked:
             if attempt == REROUTES:
