@@ -24,9 +24,8 @@ DOCK_LIMIT_S = 120.0
 
 def go_to(session: Session, step: Step) -> str:
     """Move (or navigate) to the step's destination, then do its task there if it has one."""
-    if step.destination is not None:
-        _travel(session, step.destination, step.factor)
-    return task(session, step) if step.task else f"arrived at {_where(step)}"
+    note = _travel(session, step.destination, step.factor) if step.destination is not None else ""
+    return task(session, step) if step.task else f"arrived at {_where(step)}{note}"
 
 
 def task(session: Session, step: Step) -> str:
@@ -75,7 +74,8 @@ def _where(step: Step) -> str:
     return step.destination.name if step.destination else "its place"
 
 
-def _travel(session: Session, destination: Destination, factor: float) -> None:
+def _travel(session: Session, destination: Destination, factor: float) -> str:
+    """Go there; "" or, when the spot was taken on arrival, where the robot stopped instead (traffic)."""
     x, y, name = destination.x, destination.y, destination.name
     Robot.objects.transition(
         session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id
@@ -85,14 +85,15 @@ def _travel(session: Session, destination: Destination, factor: float) -> None:
     try:
         if session.link.nav_kind:
             nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
-            traffic.travel(session, (x, y), limits, nav_speed / limits.linear, nav=True)  # goal by goal
-        else:
-            drive_route(session, (x, y), limits, factor)
+            return traffic.travel(
+                session, (x, y), limits, nav_speed / limits.linear, nav=True
+            )  # goal by goal
+        return drive_route(session, (x, y), limits, factor)
     finally:
         live.goal(session.robot, None, None, None)
 
 
-def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> None:
+def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> str:
     """Drive a route leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal.
 
     Blocked on the way (a robot that parked there after the plan was made), the robot backs off a little and
@@ -100,8 +101,7 @@ def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limi
     """
     for attempt in range(REROUTES + 1):
         try:
-            traffic.travel(session, goal, limits, factor)  # reserved, then claimed stretch by stretch
-            return
+            return traffic.travel(session, goal, limits, factor)  # reserved, then claimed stretch by stretch
         except Blocked:
             if attempt == REROUTES:
                 raise

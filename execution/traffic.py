@@ -29,6 +29,7 @@ import time
 
 import live
 from execution import coordination, route, spots
+from execution.models import Execution
 from execution.steps import Session, StepFailed, drive, navigate, travel_time
 from fleetcore import motion
 from fleetcore import traffic as plain
@@ -46,6 +47,8 @@ CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses 
 HOLD_S = 4.0  # s the cells another robot holds now are reserved for, in a newcomer's plan
 WAIT_LIMIT_S = 120.0  # s a robot waits for cells before its step fails
 REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before going around it
+BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
+BUSY = ("running", "queued")
 MAX_REROUTES = 4
 MUTEX_TTL_MS = 3000
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
@@ -147,7 +150,18 @@ def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
             still.append((held, -math.inf))
         else:
             table.reserve(str(pk), plain.swept_cells(held.a, held.b, held.r), now - 1.0, now + HOLD_S)
-    return table, still + standing(redis, {robot_id, *claims, *plans})
+    busy = busy_ids()
+    for disc, since in standing(redis, {robot_id, *claims, *plans}):
+        if int(disc.label) in busy:  # about to set off: in the way for now, not for good
+            table.reserve(disc.label, plain.footprint_cells(disc.a, disc.r), now - 1.0, now + HOLD_S)
+        else:
+            still.append((disc, since))
+    return table, still
+
+
+def busy_ids() -> set[int]:
+    """Robots with an execution running or queued: one standing now is about to move, not parked."""
+    return set(Execution.objects.filter(status__in=BUSY).values_list("robot_id", flat=True))
 
 
 def pad(t0: float):
@@ -287,7 +301,7 @@ def wait_for(session: Session, start, end) -> None:
         _put(redis, "waits", robot.pk, {"for": blocker, "expires": time.time() + 2.0})
         _renew(redis, robot.pk)
         _check_deadlock(redis, robot.pk)
-        if now - same_since > REROUTE_AFTER_S and blocker not in _hash(redis, "claims"):
+        if now - same_since > REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
             log.info("traffic: %s goes round %s, which stands in its way", robot.name, name)
             raise Reroute({blocker})
         if now - started > WAIT_LIMIT_S:
@@ -296,6 +310,13 @@ def wait_for(session: Session, start, end) -> None:
         session.pose()  # paced by odometry; a robot waiting still reports where it is
     if last is not None:
         live.path(robot, None, None)
+
+
+def _parked(redis, blocker: int, waited: float) -> bool:
+    """Whether a robot in the way is parked (go round it), not one under way or about to be (wait for it)."""
+    if blocker in _hash(redis, "claims"):
+        return False
+    return blocker not in busy_ids() or waited > BUSY_WAIT_S
 
 
 def _renew(redis, robot_id: int) -> None:
@@ -329,9 +350,11 @@ def stretches(path: list[tuple]) -> list[tuple]:
     return out
 
 
-def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bool = False) -> None:
+def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bool = False) -> str:
     """Drive (or, with its own nav stack, navigate) the robot to goal along a reserved route, stretch by
-    stretch, each claimed first; replan around a deadlock or a robot standing in the way."""
+    stretch, each claimed first; replan around a deadlock or a robot standing in the way.
+
+    Returns "" at the goal, or words on the free spot it stopped at when a robot stood on the goal."""
     robot = session.robot
     speed = limits.linear * factor * PLANNED_SPEED
     around: set[int] = set()
@@ -343,7 +366,7 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
             path = plan(robot, pose[:2], goal, speed, around, progress=session.check)
             try:
                 _follow(session, path, limits, factor, nav)
-                return
+                return _moved(tuple(goal), path[-1][:2])
             except Reroute as exc:
                 around |= exc.around
                 here = session.pose()[:2]
@@ -351,6 +374,13 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         raise StepFailed(f"{robot.name}: no way through after {MAX_REROUTES} reroutes")
     finally:
         release(robot, session.link.poses.value)
+
+
+def _moved(goal, end) -> str:
+    distance = math.dist(goal, end)
+    if distance < 0.05:
+        return ""
+    return f" (its spot was taken: it stopped {distance:.1f} m {plain.compass(goal, end)} of it)"
 
 
 def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:

@@ -6,7 +6,7 @@ import math
 import pytest
 
 from execution.instructions import submit
-from tests.execution.helpers import parse, step, wait_final
+from tests.execution.helpers import parse, step, transitions, wait_final
 
 pytestmark = [pytest.mark.slow]
 
@@ -87,4 +87,8 @@ def test_two_pairs_swapping_places_across_each_others_paths_finish_without_conta
     assert contacts(sim) == []
     for name, instruction in done.items():
         destination = instruction.executions.get().steps[0]["destination"]
-        assert math.dist(sim.pose(name)[:2], (destination["x"], destination["y"])) < 0.25, name
+        off = math.dist(sim.pose(name)[:2], (destination["x"], destination["y"]))
+        said = transitions(name)[-1][2]  # the words of its last transition: what it did
+        # On arrival a place may be too tight for a big robot (tiago at robot4's start, robot3 parked beside
+        # it): it stops at the nearest free spot and says so.
+        assert off < 0.25 or ("its spot was taken" in said and off < 0.6), (name, off, said)
