@@ -10,6 +10,7 @@ import live
 from execution import dispatch, scheduler
 from execution.instructions import submit
 from execution.models import Execution, Instruction
+from fleetcore.traffic import SPOT_MARGIN
 from places.worlds import load_world_into_db
 from robots.models import Binding, Robot
 from tests.execution.helpers import parse, step
@@ -136,7 +137,7 @@ def test_a_goal_where_a_robot_is_parked_becomes_the_nearest_free_spot(fleet, fle
     instruction = submit("move tb to A", fleet_admin, parse=parse(step(["tb"], 2.0, 2.0, "A")))
     goal = Execution.objects.get(instruction=instruction).steps[0]["destination"]
     gap = math.dist((goal["x"], goal["y"]), (2.0, 2.0))
-    assert gap >= dispatch.spots.radius_of(parked) + 0.14 + 0.15 - 1e-6  # clear of the Husky's corners
+    assert gap >= dispatch.spots.radius_of(parked) + 0.14 + SPOT_MARGIN - 1e-6  # clear of the Husky's corners
     assert gap < 1.2 and goal["around"] == "A"
     assert goal["x"] < 2.0  # on tb's side (it comes from the west)
     assert "A is taken by parked: tb goes to a free spot" in instruction.outcome
@@ -152,6 +153,6 @@ def test_two_instructions_to_one_place_never_share_the_spot(fleet, fleet_admin, 
     a = Execution.objects.get(instruction=first).steps[0]["destination"]
     b = Execution.objects.get(instruction=second).steps[0]["destination"]
     assert (a["x"], a["y"]) == (2.0, 2.0)
-    assert math.dist((a["x"], a["y"]), (b["x"], b["y"])) >= 2 * math.hypot(0.1, 0.1) + 0.15 - 1e-6
+    assert math.dist((a["x"], a["y"]), (b["x"], b["y"])) >= 2 * math.hypot(0.1, 0.1) + SPOT_MARGIN - 1e-6
     assert "A is taken by tb3_1's goal" in second.outcome
     assert Instruction.objects.get(pk=first.pk).outcome == ""  # nothing to tell: A was free
