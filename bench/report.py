@@ -23,7 +23,10 @@ SUMMARY_KEYS = (
     "sim_realtime_robots",
     "live_staleness_ms",
     "success_rate",
+    "coordination",
+    "allocation_ms_1000",
 )
+CROWDS = ("2", "4", "8", "16", "32")  # robots sent at once in the coordination bench
 
 # (summary path, comparison, threshold, what the issue asks, how our value reads)
 GOALS = (
@@ -57,6 +60,22 @@ GOALS = (
     ),
     (("success_rate", "no_nav"), ">=", 0.99, "success rate ≥ 99 % without navigation", "{:.3f}"),
     (("success_rate", "nav"), ">=", 0.99, "success rate ≥ 99 % with navigation", "{:.3f}"),
+    (("coordination", "32", "contacts"), "<=", 0, "32 robots on crossing routes: 0 contacts", "{:.0f}"),
+    (("coordination", "32", "deadlocks"), "<=", 0, "32 robots on crossing routes: 0 deadlocks", "{:.0f}"),
+    (
+        ("coordination", "32", "completion"),
+        ">=",
+        1.0,
+        "32 robots on crossing routes: every goal reached",
+        "{:.3f}",
+    ),
+    (
+        ("coordination", "32", "makespan_ratio"),
+        "<=",
+        1.5,
+        "32 robots: makespan ≤ 1.5 × the longest lone run",
+        "{:.2f} ×",
+    ),
 )
 
 
@@ -82,6 +101,18 @@ def build_summary(results: dict[str, dict]) -> dict:
         "sim_realtime_robots": None,
         "live_staleness_ms": {"p50": None, "p99": None, "robots": None, "clients": None},
         "success_rate": {"no_nav": None, "nav": None},
+        "coordination": {
+            n: {
+                "contacts": None,
+                "deadlocks": None,
+                "completion": None,
+                "makespan_s": None,
+                "lone_s": None,
+                "makespan_ratio": None,
+            }
+            for n in CROWDS
+        },
+        "allocation_ms_1000": {"p50": None, "p99": None},
     }
     for result in results.values():
         for key, value in (result.get("summary") or {}).items():
@@ -289,6 +320,33 @@ def render_table(table: paper.PaperTable, results: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def render_coordination(summary: dict) -> list[str]:
+    """The coordination bench's table: robots sent at once on crossing routes in the warehouse world."""
+    rows = summary["coordination"]
+    if not any(v is not None for row in rows.values() for v in row.values()):
+        return []
+    lines = [
+        "## Coordination (warehouse world, crossing routes)",
+        "",
+        "| robots | contacts | deadlocks | completion | makespan (s) | longest lone run (s) | ratio |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    digits = {
+        "contacts": 0,
+        "deadlocks": 0,
+        "completion": 2,
+        "makespan_s": 1,
+        "lone_s": 1,
+        "makespan_ratio": 2,
+    }
+    for n, row in rows.items():
+        lines.append(f"| {n} | " + " | ".join(_fmt(row[k], d) for k, d in digits.items()) + " |")
+    alloc = summary["allocation_ms_1000"]
+    p50, p99 = _fmt(alloc["p50"], 1), _fmt(alloc["p99"], 1)
+    lines += ["", f"Allocation among 1,000 robots: p50 {p50} ms, p99 {p99} ms.", ""]
+    return lines
+
+
 def render_markdown(results: dict[str, dict], summary: dict, mode: str, plots: list[str], meta: dict) -> str:
     parts = [f"# Benchmark report ({mode} run)", ""]
     if meta:
@@ -303,6 +361,7 @@ def render_markdown(results: dict[str, dict], summary: dict, mode: str, plots: l
     ]
     parts += render_latency(summary)
     parts += render_typed_stop(summary, results.get("typed_stop"))
+    parts += render_coordination(summary)
     missed = [(n, r["missed"]) for n, r in results.items() if r.get("missed")]
     if missed:
         parts += ["## Goals missed: why", ""] + [f"- **{n}**: {text}" for n, text in missed] + [""]
@@ -340,6 +399,8 @@ def write_plots(results: dict[str, dict], out_dir: Path) -> list[str]:
         fig.savefig(out_dir / name, dpi=90)
         plt.close(fig)
         names.append(name)
+    coordination = coordination_plot(plt, results, out_dir)
+    names += [coordination] if coordination else []
     for result in results.values():
         for series in result.get("series", []):
             fig, ax = plt.subplots(figsize=(6, 4))
@@ -358,6 +419,31 @@ def write_plots(results: dict[str, dict], out_dir: Path) -> list[str]:
             plt.close(fig)
             names.append(series["file"])
     return names
+
+
+def coordination_plot(plt, results: dict[str, dict], out_dir: Path) -> str | None:
+    """Contacts, deadlocks and makespan ratio against the robots sent at once; None without that bench."""
+    data = (results.get("component_coordination") or {}).get("component", {}).get("coordination")
+    if not data:
+        return None
+    ns = sorted(data, key=int)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.5))
+    for key in ("contacts", "deadlocks"):
+        left.plot([int(n) for n in ns], [data[n][key] for n in ns], marker="o", label=key)
+    left.set(title="Robot-robot contacts and deadlocks", xlabel="robots", ylabel="count")
+    right.plot(
+        [int(n) for n in ns], [data[n]["makespan_ratio"] for n in ns], marker="o", label="makespan / lone"
+    )
+    right.axhline(1.5, color="grey", linestyle="--", label="goal 1.5")
+    right.set(title="Makespan against the longest lone run", xlabel="robots", ylabel="ratio")
+    for ax in (left, right):
+        ax.set_xscale("log", base=2)
+        ax.legend()
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out_dir / "coordination.png", dpi=90)
+    plt.close(fig)
+    return "coordination.png"
 
 
 def _table_figure(plt, table: paper.PaperTable, ours: dict):

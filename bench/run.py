@@ -62,7 +62,9 @@ COMPONENTS = {  # bench module (owned by its component's engineer) -> (the JSON 
     "sim_capacity": ("sim_capacity.json", ("sim_realtime_robots",)),
     "interpreter_throughput": ("interpreter.json", ("interpreter_per_s",)),
     "registration": ("registration.json", ("registration_s", "identification_ms_1200_topics")),
+    "coordination": ("coordination.json", ("coordination", "allocation_ms_1000")),
 }
+COMPONENT_TIMEOUTS = {"coordination": {"quick": 900, "full": 3600}}  # s: robots drive there in simulated time
 
 
 def result(title: str, status: str = "ok", **fields) -> dict:
@@ -452,6 +454,7 @@ def run_components(mode: str, timeout: int, env: dict, out_dir: Path) -> dict[st
     out = {}
     for name, (filename, keys) in COMPONENTS.items():
         title = f"component bench bench/{name}.py"
+        timeout = COMPONENT_TIMEOUTS.get(name, {}).get(mode, timeout)
         print(f"[bench] {name} ...", flush=True)
         try:
             proc = subprocess.run(

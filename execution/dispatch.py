@@ -4,8 +4,10 @@ Rules (the paper's Figure 6 and section 3.8):
 - A robot inside one of its scheduled time slots is refused to people, with the slot named and the time it
   is free again (the schedule comes first); "all robots" means the robots online and free now.
 - The user must be allowed to command every robot (access.leases), else the whole instruction is refused.
-- Several robots sent to one destination get goals on a ring around it, in the order of their bearings,
-  so their paths do not cross and they do not meet at the goal.
+- An instruction that names no robot goes to the robots selected on the page, else to the one best robot
+  (`allocate`: capable, free, shortest planned path); when none is free it waits for one (`wait`, `retry`).
+- Goals are spots nobody else takes (execution/spots.py): several robots sent to one place get spots on a ring
+  in the order of their bearings; a place taken by a parked robot or another's goal gives the nearest free spot.
 - A new instruction preempts a robot's activity of lower priority (work > motion > dialog > ready); else it
   queues behind it.
 """
@@ -15,6 +17,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import defaultdict
+from dataclasses import dataclass, field
 
 from django.conf import settings
 from django.db import connections, transaction
@@ -22,7 +25,7 @@ from django.utils import timezone
 
 from access import leases
 from access.leases import ControlRefused, check_command
-from execution import coordination
+from execution import coordination, route, spots
 from execution.models import Execution, Instruction, TimeSlot
 from fleetcore import states as statemachine
 from fleetcore import steps as step_contract
@@ -32,11 +35,17 @@ from robots import poses as pose_store
 from robots.models import Robot
 
 FINAL = ("succeeded", "failed", "cancelled")
-RING_MARGIN = 0.35  # metres between neighbouring robots on the ring
+TIE_M = 0.05  # planned paths this close in length are a tie (then battery, then name)
+IDLE = (Robot.State.READY, Robot.State.REGISTERED, Robot.State.OFFLINE)  # dispatch wakes the last two
+MAX_REASONS = 6  # robots passed over named in an answer; the rest are counted
 
 
 class Refused(Exception):
     """The instruction cannot run; the message says why, in words for a person."""
+
+
+class NoneFree(Refused):
+    """Robots that could do it exist, but none is free now: the instruction may wait for one."""
 
 
 def local_time(moment=None):
@@ -55,22 +64,34 @@ def describe_slot(slot: TimeSlot) -> str:
     return f"{slot.start:%H:%M}-{slot.end:%H:%M} ({slot.goal.name}{task})"
 
 
+def slots_now(robots, moment=None) -> dict[int, TimeSlot]:
+    """Per robot id: its enabled time slot covering this moment (one query for many robots)."""
+    now = local_time(moment)
+    slots = TimeSlot.objects.filter(robot__in=robots, enabled=True, start__lte=now, end__gt=now)
+    return {slot.robot_id: slot for slot in slots.select_related("goal")}
+
+
 def free_robots(moment=None) -> list[Robot]:
     """Robots online and not inside a scheduled slot now."""
-    robots = Robot.objects.filter(link_status=Robot.Link.ONLINE)
-    return [robot for robot in robots if active_slot(robot, moment) is None]
+    robots = list(Robot.objects.filter(link_status=Robot.Link.ONLINE))
+    slots = slots_now(robots, moment)
+    return [robot for robot in robots if robot.pk not in slots]
 
 
-def resolve_robots(step: dict, moment=None, check_schedule: bool = True, user=None) -> list[Robot]:
-    """The robots a step names, each online and (for people) outside its scheduled slots."""
+def resolve_robots(
+    step: dict, moment=None, check_schedule: bool = True, user=None
+) -> tuple[list[Robot], str]:
+    """The robots a step names, each online and (for people) outside its scheduled slots; and, for a step
+    that names none, why the one chosen was chosen."""
     names = step.get("robots")
     if names in (None, "", ANY):
-        return [allocate(Step.from_dict(step), user, moment, check_schedule)]
+        robot, why = allocate(Step.from_dict(step), user, moment, check_schedule)
+        return [robot], why
     if names == "all":
         robots = free_robots(moment) if check_schedule else list(Robot.objects.filter(link_status="online"))
         if not robots:
             raise Refused("No robot is free now (all are offline or busy with their schedules).")
-        return robots
+        return robots, ""
     if not names:
         raise Refused("Say which robot should do it (a name, or 'all robots').")
     found = {robot.name: robot for robot in Robot.objects.filter(name__in=names)}
@@ -86,16 +107,17 @@ def resolve_robots(step: dict, moment=None, check_schedule: bool = True, user=No
             raise Refused(
                 f"{robot.name} is busy with its schedule {describe_slot(slot)}; it is free from {slot.end:%H:%M}."
             )
-    return robots
+    return robots, ""
 
 
-def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) -> Robot:
-    """The one best robot for a step that names none: capable, free, nearest to the destination.
+def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) -> tuple[Robot, str]:
+    """The one best robot for a step that names none, and why it, in words for a person.
 
-    Capable: bound for what the action needs (fleetcore/actions.py). Free: online and ready, no running or queued
-    instruction, no schedule slot now, no lease held by someone else. Nearest: straight-line distance from its
-    last pose to the destination (robots without a known pose come last). Ties: the lower name.
-    Refused, naming why each robot was passed over, when none is free.
+    Capable: bound for what the action needs (fleetcore/actions.py) and able to reach the destination (a planned
+    path fits its footprint). Free: online and ready, no running or queued instruction, no schedule slot now, no
+    lease held by someone else. Best: the shortest planned path from its last pose (route.planned_length, the
+    planner route.py drives with); ties by battery when known, then the name. NoneFree (the instruction may
+    wait) when capable robots exist but none is free; Refused when no robot could ever do it.
     """
     candidates = list(Robot.objects.filter(link_status=Robot.Link.ONLINE).prefetch_related("bindings"))
     busy = set(
@@ -104,38 +126,108 @@ def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) ->
         .values_list("robot_id", flat=True)
     )
     held = {lease.robot_id: lease.user for lease in leases.active([r.pk for r in candidates])}
-    passed_over, free = [], []
+    slots = slots_now(candidates, moment) if check_schedule else {}
+    incapable, not_now, free = [], [], []
     for robot in candidates:
-        roles = {b.action for b in robot.bindings.all() if b.target}
-        why = _unfit(robot, step, roles, robot.pk in busy, held.get(robot.pk), user, moment, check_schedule)
-        (passed_over.append(f"{robot.name} {why}") if why else free.append(robot))
+        missing = step.spec.missing({b.action for b in robot.bindings.all() if b.target})
+        if missing:
+            incapable.append(f"{robot.name} has no {' and no '.join(missing)} bound")
+            continue
+        why = _not_free(robot, robot.pk in busy, held.get(robot.pk), user, slots.get(robot.pk))
+        (not_now.append(f"{robot.name} {why}") if why else free.append(robot))
     if not free:
-        detail = "; ".join(passed_over) or "no robot is online"
-        raise Refused(
-            f"No robot is free to {step.action} now ({detail}). Name one, or try again when one is free."
-        )
-    poses = pose_store.last_poses([robot.pk for robot in free])
-    target = (step.destination.x, step.destination.y) if step.destination else None
-
-    def distance(robot: Robot) -> float:
-        pose = poses.get(robot.pk) or _start(robot)
-        return math.dist((pose["x"], pose["y"]), target) if pose and target else math.inf
-
-    return min(free, key=lambda robot: (distance(robot), robot.name))
+        detail = _listed(not_now + incapable) or "no robot is online"
+        if not_now:
+            raise NoneFree(f"No robot is free to {step.action} now ({detail}).")
+        raise Refused(f"No robot can {step.action} ({detail}).")
+    robot, why, unreachable = best_of(free, step.destination)
+    return robot, f"{robot.name}: {why}" + (
+        f"; {_listed(unreachable + not_now + incapable)}" if unreachable or not_now or incapable else ""
+    )
 
 
-def _unfit(robot, step: Step, roles, busy, holder, user, moment, check_schedule) -> str | None:
-    """Why this robot cannot take the step now, in words; None when it can."""
-    missing = step.spec.missing(roles)
-    if missing:
-        return f"has no {' and no '.join(missing)} bound"
-    if busy or robot.state != Robot.State.READY:
+def _not_free(robot, busy: bool, holder, user, slot: TimeSlot | None) -> str | None:
+    """Why this capable robot cannot take the step now, in words; None when it can."""
+    if busy or robot.state not in IDLE:
         return f"is busy ({robot.state})"
     if holder is not None and holder != user:
         return f"is held by {holder.username}"
-    if check_schedule and (slot := active_slot(robot, moment)) is not None:
+    if slot is not None:
         return f"has its schedule {describe_slot(slot)}"
     return None
+
+
+def _listed(reasons: list[str]) -> str:
+    shown = ", ".join(reasons[:MAX_REASONS])
+    return shown + (f" and {len(reasons) - MAX_REASONS} more" if len(reasons) > MAX_REASONS else "")
+
+
+def best_of(free: list[Robot], destination) -> tuple[Robot, str, list[str]]:
+    """The free robot with the shortest planned path to the destination (branch and bound: the straight line
+    is a lower bound of any path, so robots farther in a straight line than the best path are not planned).
+
+    Returns the robot, why it in words, and the robots that cannot reach the destination (in words).
+    Without a destination: the fullest battery when known, then the name.
+    """
+    poses = pose_store.last_poses([robot.pk for robot in free])
+    if destination is None:
+        robot = min(free, key=lambda r: (-(_battery(r, poses) or 0.0), r.name))
+        battery = _battery(robot, poses)
+        return robot, (f"free, battery {battery:.0f}%" if battery is not None else "free"), []
+    target = (destination.x, destination.y)
+    starts = {robot.pk: _position(robot, poses) for robot in free}
+    ranked = sorted(
+        free, key=lambda r: (math.dist(starts[r.pk], target) if starts[r.pk] else math.inf, r.name)
+    )
+    row, lengths, unreachable, tried, best = route.fleet_map(), {}, [], set(), math.inf
+    for robot in ranked:
+        start = starts[robot.pk]
+        if start is None or math.dist(start, target) > best + TIE_M:
+            break
+        length = route.planned_length(robot, start, target, row)
+        tried.add(robot.pk)
+        if length is None:
+            unreachable.append(f"{robot.name} cannot reach {destination.name} (no path fits it)")
+            continue
+        lengths[robot.pk] = length
+        best = min(best, length)
+    if not lengths:
+        unknown = [robot for robot in ranked if starts[robot.pk] is None]
+        if not unknown:
+            raise Refused(f"No free robot can reach {destination.name} ({_listed(unreachable)}).")
+        return unknown[0], "free (its position is not known yet)", unreachable
+    tied = [robot for robot in ranked if lengths.get(robot.pk, math.inf) <= best + TIE_M]
+    robot = min(tied, key=lambda r: (-(_battery(r, poses) or 0.0), r.name))
+    why = f"nearest free robot, {lengths[robot.pk]:.1f} m"
+    if len(tied) > 1 and _battery(robot, poses) is not None:
+        why += f", battery {_battery(robot, poses):.0f}%"
+    farther = [
+        _distance_words(r, lengths, starts[r.pk], target)
+        for r in ranked
+        if r is not robot and r.pk not in tried - set(lengths)
+    ]
+    farther = [words for words in farther if words]
+    return robot, why + (f" ({', '.join(farther[:MAX_REASONS])})" if farther else ""), unreachable
+
+
+def _distance_words(robot: Robot, lengths: dict, start, target) -> str:
+    """ "tiago 5.2 m" (planned), "spot 7.9+ m" (not planned: at least its straight line), "" (unknown or no path)."""
+    if robot.pk in lengths:
+        return f"{robot.name} {lengths[robot.pk]:.1f} m"
+    if start is None:
+        return ""
+    return f"{robot.name} {math.dist(start, target):.1f}+ m"
+
+
+def _position(robot: Robot, poses: dict) -> tuple[float, float] | None:
+    pose = poses.get(robot.pk) or _start(robot)
+    return (float(pose["x"]), float(pose["y"])) if pose else None
+
+
+def _battery(robot: Robot, poses: dict) -> float | None:
+    """The robot's battery percentage when something reported it (its live pose or its description)."""
+    value = (poses.get(robot.pk) or {}).get("battery", robot.description.get("battery"))
+    return float(value) if isinstance(value, int | float) else None
 
 
 def _start(robot: Robot) -> dict | None:
@@ -143,48 +235,28 @@ def _start(robot: Robot) -> dict | None:
     return {"x": pose[0], "y": pose[1]} if pose and len(pose) >= 2 else None
 
 
-def radius_of(robot: Robot) -> float:
-    """Half the largest extent of the robot's footprint (0.3 m when unknown)."""
-    points = robot.footprint or []
-    if not points:
-        return 0.3
-    return max(math.hypot(x, y) for x, y in points)
+@dataclass
+class Plan:
+    """What plan() decided: each robot's steps, and what the person is told about who was chosen and where."""
+
+    per_robot: dict[Robot, list[dict]]
+    notes: list[str] = field(default_factory=list)
+
+    def items(self):
+        return self.per_robot.items()
 
 
-def ring_goals(destination: dict, robots: list[Robot], poses: dict) -> dict[int, dict]:
-    """A goal per robot on a ring around the destination, in the cyclic order of the robots' bearings.
+def plan(
+    parse: dict, user, moment=None, check_schedule: bool = True, selected: list[int] | None = None
+) -> Plan:
+    """Split the interpreter's steps into each robot's list of steps, or raise Refused (NoneFree: wait).
 
-    The ring's rotation is the circular mean of (bearing - slot angle), so each robot's slot lies on its own
-    side of the destination and the paths of neighbours do not cross.
+    selected: robots chosen on the page; a step that names no robot goes to them. Several "any" steps of one
+    instruction go to the one robot chosen for the first ("move to A, then to B").
     """
-    cx, cy = float(destination["x"]), float(destination["y"])
-    n = len(robots)
-    spacing = 2 * max(radius_of(robot) for robot in robots) + RING_MARGIN
-    radius = max(spacing / (2 * math.sin(math.pi / n)), spacing) if n > 1 else 0.0
-
-    def bearing(robot):
-        x, y, _ = poses.get(robot.pk) or (robot.start_pose or (cx - 1.0, cy, 0.0))
-        return math.atan2(y - cy, x - cx)
-
-    ordered = sorted(robots, key=bearing)
-    offsets = [bearing(robot) - 2 * math.pi * i / n for i, robot in enumerate(ordered)]
-    rotation = math.atan2(sum(map(math.sin, offsets)), sum(map(math.cos, offsets)))
-    goals = {}
-    for i, robot in enumerate(ordered):
-        angle = rotation + 2 * math.pi * i / n
-        goals[robot.pk] = {
-            **destination,
-            "x": round(cx + radius * math.cos(angle), 3),
-            "y": round(cy + radius * math.sin(angle), 3),
-            "around": destination.get("name"),
-        }
-    return goals
-
-
-def plan(parse: dict, user, moment=None, check_schedule: bool = True) -> dict[Robot, list[dict]]:
-    """Split the interpreter's steps into each robot's list of steps, or raise Refused."""
     per_robot: dict[int, list[dict]] = defaultdict(list)
     robots_by_id: dict[int, Robot] = {}
+    notes: list[str] = []
     try:
         steps = step_contract.validate(parse.get("steps"))
     except step_contract.StepError as exc:
@@ -193,11 +265,20 @@ def plan(parse: dict, user, moment=None, check_schedule: bool = True) -> dict[Ro
         pk: (p["x"], p["y"], p.get("yaw", 0.0))
         for pk, p in pose_store.last_poses(Robot.objects.values_list("pk", flat=True)).items()
     }
-    for checked, step in zip(steps, parse["steps"], strict=True):
+    chosen: list[str] | None = _selected_names(selected)
+    for checked in steps:
         step = checked.to_dict()
-        robots = resolve_robots(step, moment, check_schedule, user)
+        if step.get("robots") in (None, "", ANY) and chosen:
+            step["robots"] = chosen
+        robots, why = resolve_robots(step, moment, check_schedule, user)
+        if why:
+            notes.append(why)
+            chosen = [robot.name for robot in robots]
         destination = step.get("destination")
-        goals = ring_goals(destination, robots, poses) if destination and len(robots) > 1 else {}
+        try:
+            goals = spots.assign(destination, robots, poses, notes) if destination else {}
+        except spots.NoRoom as exc:
+            raise Refused(str(exc)) from None
         for robot in robots:
             robots_by_id[robot.pk] = robot
             per_robot[robot.pk].append(
@@ -211,14 +292,27 @@ def plan(parse: dict, user, moment=None, check_schedule: bool = True) -> dict[Ro
                 check_command(user, robot)
             except ControlRefused as exc:
                 raise Refused(str(exc)) from None
-    return {robots_by_id[pk]: steps for pk, steps in per_robot.items()}
+    return Plan({robots_by_id[pk]: steps for pk, steps in per_robot.items()}, notes)
+
+
+def _selected_names(selected: list[int] | None) -> list[str] | None:
+    """The names of the robots selected on the page, in the order given; Refused for an unknown id."""
+    if not selected:
+        return None
+    found = dict(Robot.objects.filter(pk__in=selected).values_list("pk", "name"))
+    unknown = [str(pk) for pk in selected if pk not in found]
+    if unknown:
+        raise Refused(f"No robot with id {', '.join(unknown)} is registered.")
+    return [found[pk] for pk in dict.fromkeys(selected)]
 
 
 @transaction.atomic
-def dispatch(instruction: Instruction, per_robot: dict[Robot, list[dict]]) -> list[Execution]:
-    """Create the executions, wake or preempt robots as the state machine says, and queue the instruction."""
+def dispatch(instruction: Instruction, plan: Plan) -> list[Execution]:
+    """Create the executions, wake or preempt robots as the state machine says, and queue the instruction
+    (its outcome says, until it ends, who was chosen and where they go)."""
     now = timezone.now()
     executions, preempts = [], []
+    per_robot = plan.per_robot
     for robot, steps in per_robot.items():
         robot.refresh_from_db(fields=["state", "link_status"])
         if robot.state in (Robot.State.OFFLINE, Robot.State.REGISTERED):
@@ -233,10 +327,77 @@ def dispatch(instruction: Instruction, per_robot: dict[Robot, list[dict]]) -> li
         if admission == Admission.PREEMPT:
             preempts.append((robot.pk, execution.pk))
     instruction.robots.set([robot.pk for robot in per_robot])
-    Instruction.objects.filter(pk=instruction.pk).update(status=Instruction.Status.QUEUED, dispatched_at=now)
-    instruction.status, instruction.dispatched_at = Instruction.Status.QUEUED, now
+    outcome = "; ".join(plan.notes)[:4000]
+    Instruction.objects.filter(pk=instruction.pk).update(
+        status=Instruction.Status.QUEUED, dispatched_at=now, outcome=outcome
+    )
+    instruction.status, instruction.dispatched_at, instruction.outcome = (
+        Instruction.Status.QUEUED,
+        now,
+        outcome,
+    )
     transaction.on_commit(lambda: _after_commit(instruction.pk, preempts))
     return executions
+
+
+WAITING_NOTE = "waiting for a free robot"
+WAIT_LIMIT_S = 600.0  # an instruction waits this long for a free robot, then is refused
+
+
+def wait(instruction: Instruction, reason: str) -> Instruction:
+    """Nobody is free: the instruction stays queued, says what it waits for, and `retry` allocates it later."""
+    instruction.status, instruction.outcome = Instruction.Status.QUEUED, f"{WAITING_NOTE}: {reason}"[:4000]
+    instruction.save(update_fields=["status", "outcome"])
+    return instruction
+
+
+def waiting():
+    """Instructions queued without executions because no robot was free (oldest first)."""
+    return Instruction.objects.filter(
+        status=Instruction.Status.QUEUED, executions__isnull=True, outcome__startswith=WAITING_NOTE
+    ).order_by("received_at")
+
+
+def retry(now=None) -> list[int]:
+    """Allocate the waiting instructions whose robot has become free; refuse those waiting too long.
+
+    Called by the scheduler each tick. Returns the instructions dispatched now.
+    """
+    now = now or timezone.now()
+    dispatched = []
+    for pk in list(waiting().values_list("pk", flat=True)[:50]):
+        with transaction.atomic():
+            instruction = waiting().select_for_update().filter(pk=pk).select_related("user").first()
+            if instruction is not None and _retry_one(instruction, now):
+                dispatched.append(pk)
+    return dispatched
+
+
+def _retry_one(instruction: Instruction, now) -> bool:
+    """One waiting instruction: dispatch it, keep it waiting (with the reasons now), or refuse it."""
+    import live
+
+    try:
+        dispatch(
+            instruction,
+            plan(instruction.parse, instruction.user, check_schedule=instruction.source != "schedule"),
+        )
+        live.instruction(instruction)
+        return True
+    except NoneFree as exc:
+        if (now - instruction.received_at).total_seconds() < WAIT_LIMIT_S:
+            if instruction.outcome != f"{WAITING_NOTE}: {exc}"[:4000]:
+                live.instruction(wait(instruction, str(exc)))
+            return False
+        reason = f"no robot became free within {WAIT_LIMIT_S / 60:.0f} min ({exc})"
+    except (Refused, ControlRefused) as exc:
+        reason = str(exc)
+    Instruction.objects.filter(pk=instruction.pk).update(
+        status=Instruction.Status.REFUSED, outcome=reason[:4000], finished_at=now
+    )
+    instruction.refresh_from_db()
+    live.instruction(instruction)
+    return False
 
 
 def _after_commit(instruction_id: int, preempts: list[tuple[int, int]]) -> None:

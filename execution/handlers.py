@@ -12,7 +12,8 @@ import time
 
 import alerts
 import live
-from execution.route import reach_radius, route
+from execution import traffic
+from execution.route import reach_radius
 from execution.steps import (
     STALL_S,
     Session,
@@ -20,7 +21,6 @@ from execution.steps import (
     StepFailed,
     drive,
     follow_goal,
-    navigate,
     travel_time,
 )
 from fleetcore import motion
@@ -29,9 +29,7 @@ from fleetcore.steps import Destination, Step, parse_task
 from robots import poses as pose_store
 from robots.models import Robot
 
-WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
 STALL_TRIES, BACK_OFF_S = 2, 1.0  # after a stall: back off and plan again (or send the goal afresh) twice
-NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 NEAR_M = 0.3  # m between two robots' reach discs: the other one is what stands in the way
 DOCK_LIMIT_S = 120.0
 STUCK = "robot_stuck"  # the alert kind a stall raises
@@ -39,9 +37,8 @@ STUCK = "robot_stuck"  # the alert kind a stall raises
 
 def go_to(session: Session, step: Step) -> str:
     """Move (or navigate) to the step's destination, then do its task there if it has one."""
-    if step.destination is not None:
-        _travel(session, step.destination, step.factor)
-    return task(session, step) if step.task else f"arrived at {_where(step)}"
+    note = _travel(session, step.destination, step.factor) if step.destination is not None else ""
+    return task(session, step) if step.task else f"arrived at {_where(step)}{note}"
 
 
 def task(session: Session, step: Step) -> str:
@@ -77,7 +74,7 @@ def dock(session: Session, step: Step) -> str:
         session.check()
         goal = session.link.dock()
         session.mark_commanded()
-        follow_goal(session, goal, DOCK_LIMIT_S, "docking", stall_s=NAV_STALL_S, toward=False)
+        follow_goal(session, goal, DOCK_LIMIT_S, "docking", stall_s=traffic.NAV_STALL_S, toward=False)
         return "docked"
     x0, y0, _ = robot.start_pose or (0.0, 0.0, 0.0)
     _travel(session, Destination("home", x0, y0), step.factor)
@@ -93,8 +90,9 @@ def _where(step: Step) -> str:
     return step.destination.name if step.destination else "its place"
 
 
-def _travel(session: Session, destination: Destination, factor: float) -> None:
-    """Get to the destination by the robot's own navigation or the route driver; a stall says what blocks it."""
+def _travel(session: Session, destination: Destination, factor: float) -> str:
+    """Get to the destination along a reserved route (execution.traffic), by the robot's own navigation or the
+    route driver; a stall says what blocks it. Returns "" or, when its spot was taken, where it stopped."""
     x, y, name = destination.x, destination.y, destination.name
     Robot.objects.transition(
         session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id
@@ -103,51 +101,41 @@ def _travel(session: Session, destination: Destination, factor: float) -> None:
     limits = session.link.limits()
     try:
         if session.link.nav_kind:
-            navigate_to(session, (x, y), limits)
-        else:
-            drive_route(session, (x, y), limits, factor)
+            return navigate_to(session, (x, y), limits)
+        return drive_route(session, (x, y), limits, factor)
     except StepFailed as exc:
         raise StepFailed(_explain(session, destination, exc)) from exc
     finally:
         live.goal(session.robot, None, None, None)
 
 
-def navigate_to(session: Session, goal: tuple[float, float], limits: motion.Limits) -> None:
-    """Hand the goal to the robot's nav stack; when it makes no progress, send it afresh (a new plan from
-    where the robot is, with what its sensors see now), up to STALL_TRIES times. A stack that aborts has
-    tried its own recoveries already: that ends the step."""
+def navigate_to(session: Session, goal: tuple[float, float], limits: motion.Limits) -> str:
+    """Hand the reserved route's goals to the robot's nav stack; when it makes no progress, send them afresh
+    (a new plan from where the robot is, with what its sensors see now), up to STALL_TRIES times. A stack that
+    aborts has tried its own recoveries already: that ends the step."""
     nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
     for attempt in range(STALL_TRIES + 1):
-        pose = session.pose()
-        distance = math.dist(pose[:2], goal)
-        limit = travel_time(distance * 1.5, math.pi, limits, nav_speed / limits.linear)
         try:
-            navigate(session, *goal, limit, stall_s=NAV_STALL_S)
-            return
+            return traffic.travel(session, goal, limits, nav_speed / limits.linear, nav=True)
         except Stalled as exc:
             _stalled(session, exc, attempt)
+    return ""
 
 
-def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> None:
-    """Drive a route leg by leg with the Figure 7 controller: loose at the corners, within tolerance at the goal.
+def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> str:
+    """Drive a reserved route (execution.traffic: planned in space and time, claimed stretch by stretch) with the
+    Figure 7 controller: loose at the corners, within tolerance at the goal.
 
-    Stalled on the way (a robot that parked there after the plan was made), the robot backs off a little and
-    plans again from where it is, with the other robots' live poses, up to STALL_TRIES times.
+    Stalled on the way (something the plan did not know), the robot backs off a little and plans again from
+    where it is, with the other robots' live poses and reservations, up to STALL_TRIES times.
     """
     for attempt in range(STALL_TRIES + 1):
-        pose = session.pose()
         try:
-            for x, y in route(session.robot, pose[:2], goal):
-                pose = session.pose()
-                last_leg = (x, y) == goal
-                tolerance = motion.TOLERANCE if last_leg else WAYPOINT_TOLERANCE
-                controller = motion.GoToGoal((x, y), limits, factor, tolerance)
-                limit = travel_time(math.hypot(x - pose[0], y - pose[1]), math.pi, limits, factor)
-                drive(session, controller, limit, stall_s=STALL_S, goal=(x, y))
-            return
+            return traffic.travel(session, goal, limits, factor)
         except Stalled as exc:
             _stalled(session, exc, attempt)
             back_off(session, limits)
+    return ""
 
 
 def _stalled(session: Session, exc: Stalled, attempt: int) -> None:

@@ -23,11 +23,17 @@ from robots.models import Robot
 
 
 def submit(
-    text: str, user, source: str = "console", parse: dict | None = None, answer_to=None
+    text: str,
+    user,
+    source: str = "console",
+    parse: dict | None = None,
+    answer_to=None,
+    robot_ids: list[int] | None = None,
 ) -> Instruction:
     """Receive, interpret and (when understood and allowed) dispatch one instruction.
 
     parse: an interpreter result given by the caller (schedules, tests); else the interpreter is asked.
+    robot_ids: the robots selected on the page; a step whose text names no robot goes to them.
     """
     text = (text or "").strip()
     if not text:
@@ -36,10 +42,10 @@ def submit(
     if _is_stop(result) and (user is None or can_control(user)):
         fast_stop.stop_blocking(_stop_names(result))  # before any database write, like the button
     with transaction.atomic():
-        return _store_and_dispatch(text, user, source, result, answer_to)
+        return _store_and_dispatch(text, user, source, result, answer_to, robot_ids)
 
 
-def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to) -> Instruction:
+def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to, robot_ids=None) -> Instruction:
     instruction = Instruction.objects.create(text=text, user=user, source=source, answer_to=answer_to)
     audit.record(user, "instruct", text[:255], instruction=instruction.pk, source=source)
     if answer_to is not None:
@@ -53,8 +59,10 @@ def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to) -
     if _is_stop(result):
         return _stop(instruction, result, user)
     try:
-        per_robot = dispatch.plan(result, user, check_schedule=source != "schedule")
-        dispatch.dispatch(instruction, per_robot)
+        plan = dispatch.plan(result, user, check_schedule=source != "schedule", selected=robot_ids)
+        dispatch.dispatch(instruction, plan)
+    except dispatch.NoneFree as exc:
+        instruction = dispatch.wait(instruction, str(exc))
     except (dispatch.Refused, ControlRefused) as exc:
         return _close(instruction, Instruction.Status.REFUSED, str(exc))
     live.instruction(instruction)

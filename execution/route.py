@@ -8,6 +8,7 @@ inflated by the robot's footprint, and the Figure 7 controller drives leg by leg
 from __future__ import annotations
 
 import functools
+import itertools
 import logging
 import math
 
@@ -66,6 +67,29 @@ def _planner(map_id: int, version: str, radius: float) -> Planner:
     return Planner(grid, radius)
 
 
+def planner_for(robot, row: Map | None = None) -> Planner | None:
+    """The planner for this robot's size on the fleet map (row: the map, when the caller has it); None: no map."""
+    row = row or fleet_map()
+    if row is None:
+        return None
+    return _planner(row.pk, row.created_at.isoformat(), round(footprint_radius(robot.footprint), 2))
+
+
+def path_length(start: tuple[float, float], path: list[tuple[float, float]]) -> float:
+    """Metres along the waypoints from start."""
+    return sum(math.dist(a, b) for a, b in itertools.pairwise([start, *path]))
+
+
+def planned_length(robot, start, goal, row: Map | None = None) -> float | None:
+    """Length of the route the robot would drive from start to goal (m): the straight line without a map,
+    None when no path fits the robot (walls, or too narrow a gap for its footprint)."""
+    planner = planner_for(robot, row)
+    if planner is None:
+        return math.dist(start, goal)
+    path = planner.plan(tuple(start), tuple(goal))
+    return None if path is None else path_length(tuple(start), path)
+
+
 def robots_in_the_way(robot, start: tuple[float, float]) -> list[tuple[float, float, float]]:
     """Other robots near the start as discs (x, y, radius): where the links process last saw them, and where
     those under way are going (they will stand there when we pass)."""
@@ -85,7 +109,7 @@ def route(robot, start: tuple[float, float], goal: tuple[float, float]) -> list[
     row = fleet_map()
     if row is None:
         return [goal]
-    planner = _planner(row.pk, row.created_at.isoformat(), round(footprint_radius(robot.footprint), 2))
+    planner = planner_for(robot, row)
     others = robots_in_the_way(robot, start)
     path = (planner.plan(start, goal, avoid=others) if others else None) or planner.plan(start, goal)
     if path is None:

@@ -190,6 +190,8 @@ def settle(instruction_id: int, note: str = "") -> None:
     else:
         status = Instruction.Status.SUCCEEDED
     outcome = "; ".join(f"{row.robot.name}: {row.status}{_detail(row)}" for row in rows)
+    chosen = Instruction.objects.filter(pk=instruction_id).values_list("outcome", flat=True).first()
+    outcome = f"{chosen}. {outcome}" if chosen else outcome  # who was chosen and why (execution.dispatch)
     Instruction.objects.filter(pk=instruction_id).exclude(status__in=Instruction.FINAL).update(
         status=status, finished_at=timezone.now(), outcome=outcome[:4000]
     )

@@ -5,6 +5,7 @@ Every WATCHDOG_S (a quarter second), the watchdog stops the robots of executors 
 fails their executions ("executor lost"). One tick (every half second in `python manage.py scheduler`):
 1. robots with queued executions and no runner get a drain task;
 2. each enabled time slot that covers now and has not run today becomes an instruction (source "schedule");
+   instructions waiting for a free robot are allocated when one is free (execution.dispatch.retry);
 3. robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle in ready longer than
    FLEET_IDLE_TIMEOUT_SECONDS go offline (they wake on the next instruction);
 4. the sweeps finish what has no owner any more (execution/sweeps.py: stale received instructions,
@@ -25,7 +26,7 @@ from django.db import close_old_connections
 from django.db.models import Max
 from django.utils import timezone
 
-from execution import coordination, sweeps, watchdog
+from execution import coordination, dispatch, sweeps, watchdog
 from execution.models import TimeSlot
 from fleetcore.states import Event
 from robots.models import Robot
@@ -112,6 +113,7 @@ def tick(clock: Clock) -> dict:
     close_old_connections()
     report = {"recovered": watchdog.recover(), "kicked": watchdog.kick_stalled()}
     report["scheduled"] = [instruction.pk for instruction in run_due_slots(clock.now())]
+    report["allocated"] = dispatch.retry()  # instructions that waited for a free robot
     expire_idle(timezone.now())
     report.update(sweeps.sweep())
     return report

@@ -150,6 +150,14 @@ class GoalUpdate(TypedDict):
     y: float | None
 
 
+class RobotPath(TypedDict):
+    type: str  # "robot.path"
+    id: int
+    robot: str
+    path: list[list[float]] | None  # the route it has reserved, [[x, y], ...]; None: unchanged; []: none
+    waiting_for: str | None  # the robot it waits for to make way, if any
+
+
 class RegistrationProgress(TypedDict, total=False):
     type: str  # "registration.progress"
     endpoint: str
@@ -176,6 +184,20 @@ def lease(robot, current=None) -> None:
 def goal(robot, name: str | None, x: float | None, y: float | None) -> None:
     """A robot's current goal changed (None clears it); the map draws it."""
     payload = GoalUpdate(type="robot.goal", id=robot.pk, robot=robot.name, name=name, x=x, y=y)
+    send_on_commit(FLEET_GROUP, payload)
+    send_on_commit(robot_group(robot.pk), payload)
+
+
+def path(robot, points, waiting_for: str | None) -> None:
+    """A robot's reserved route changed (points; None leaves it as drawn), or whom it waits for; the map
+    draws both. Sent at once: the executor pushes it from its loop, outside any transaction."""
+    payload = RobotPath(
+        type="robot.path",
+        id=robot.pk,
+        robot=robot.name,
+        path=None if points is None else [[float(x), float(y)] for x, y in points],
+        waiting_for=waiting_for,
+    )
     send_on_commit(FLEET_GROUP, payload)
     send_on_commit(robot_group(robot.pk), payload)
 

@@ -70,7 +70,8 @@ class Destination(Schema):
 
 
 class InstructionIn(Schema):
-    """Words for the interpreter, or (click-to-move) robot ids and a destination, which never become words."""
+    """Words for the interpreter (robot_ids: the robots selected on the page, for a text that names none), or
+    (click-to-move) robot ids and a destination, which never become words."""
 
     text: NonBlank | None = Field(None, max_length=2000)
     robot_ids: list[Id] | None = Field(None, min_length=1, max_length=1000)
@@ -79,10 +80,12 @@ class InstructionIn(Schema):
 
     @model_validator(mode="after")
     def words_or_ids(self):
-        if (self.text is None) == (self.robot_ids is None):
-            raise ValueError("text: give either text, or robot_ids with a destination")
-        if self.robot_ids is not None and self.destination is None:
-            raise ValueError("destination: robot_ids need a destination")
+        if self.text is None and self.robot_ids is None:
+            raise ValueError("text: give text, or robot_ids with a destination")
+        if self.text is None and self.destination is None:
+            raise ValueError("destination: robot_ids without text need a destination")
+        if self.text is not None and self.destination is not None:
+            raise ValueError("destination: goes with robot_ids and no text (click-to-move)")
         return self
 
 
@@ -159,7 +162,7 @@ def create_instruction(request, payload: InstructionIn):
     """Give an instruction in words, or send robots (by id) to a place: click-to-move, no words involved."""
     from execution.instructions import submit
 
-    if payload.robot_ids is not None:
+    if payload.text is None:
         text, parse = _move_by_ids(payload.robot_ids, payload.destination)
         return Status(201, submit(text, request.user, source="api", parse=parse))
     answer_to = None
@@ -167,7 +170,10 @@ def create_instruction(request, payload: InstructionIn):
         answer_to = get_or_404(
             Instruction, "answer_to", pk=payload.answer_to, status=Instruction.Status.NEEDS_USER
         )
-    return Status(201, submit(payload.text, request.user, source="api", answer_to=answer_to))
+    return Status(
+        201,
+        submit(payload.text, request.user, source="api", answer_to=answer_to, robot_ids=payload.robot_ids),
+    )
 
 
 def _move_by_ids(robot_ids: list[int], destination: Destination) -> tuple[str, dict]:

@@ -325,7 +325,7 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         await self.send_json(event)
 
     # One handler per payload type of live; the name matches the message "type".
-    robot_status = instruction_update = robot_goal = forward
+    robot_status = instruction_update = robot_goal = robot_path = forward
     robot_transition = lease_update = changed
 
     async def registration_progress(self, event):

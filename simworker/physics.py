@@ -20,6 +20,7 @@ from fleetcore.mapfile import OCCUPIED, OccupancyGrid
 DEFAULT_DT = 1.0 / 50.0
 WALL_CATEGORY = 0b01
 ROBOT_CATEGORY = 0b10
+ROBOT_COLLISION = 1  # pymunk collision_type of every robot shape: robot-robot contacts are counted
 
 
 def _clamp(value: float, low: float, high: float) -> float:
@@ -34,6 +35,15 @@ class Command:
     vy: float = 0.0
     wz: float = 0.0
     stamp: float = -1e9
+
+
+@dataclass(frozen=True)
+class Contact:
+    """Two robots' bodies began to touch at simulated time t (s)."""
+
+    t: float
+    a: str
+    b: str
 
 
 class RobotBody:
@@ -58,6 +68,7 @@ class RobotBody:
         self.shape = pymunk.Poly(self.body, box, radius=0.005)
         self.shape.friction = 0.2
         self.shape.filter = pymunk.ShapeFilter(group=group, categories=ROBOT_CATEGORY)
+        self.shape.collision_type = ROBOT_COLLISION
         self.body.velocity_func = self._drive
 
     def command(self, vx: float, wz: float, vy: float = 0.0) -> None:
@@ -113,6 +124,11 @@ class Physics:
         self.space.iterations = 6
         self.space.sleep_time_threshold = 0.5
         self.robots: dict[str, RobotBody] = {}
+        self._names: dict[pymunk.Shape, str] = {}
+        self.contacts: list[
+            Contact
+        ] = []  # every robot-robot touch, in order (tests and the bench count them)
+        self.space.on_collision(ROBOT_COLLISION, ROBOT_COLLISION, begin=self._touched)
         self.wall_boxes = wall_boxes(grid)
         for x0, y0, x1, y1 in self.wall_boxes:
             shape = pymunk.Poly.create_box_bb(self.space.static_body, pymunk.BB(x0, y0, x1, y1))
@@ -129,6 +145,7 @@ class Physics:
         robot.body.angle = yaw
         self.space.add(robot.body, robot.shape)
         self.robots[name] = robot
+        self._names[robot.shape] = name
         return robot
 
     def add_fixture(self, x: float, y: float, yaw: float, length: float, width: float) -> None:
@@ -143,6 +160,11 @@ class Physics:
         shape.friction = 0.2
         shape.filter = pymunk.ShapeFilter(categories=WALL_CATEGORY)
         self.space.add(shape)
+
+    def _touched(self, arbiter: pymunk.Arbiter, space, data) -> None:
+        """Two robot bodies began to touch: record who and when (the collision is still solved normally)."""
+        a, b = (self._names.get(shape, "?") for shape in arbiter.shapes)
+        self.contacts.append(Contact(self.time, *sorted((a, b))))
 
     def step(self) -> None:
         """Advance the world by one fixed dt."""

@@ -61,6 +61,7 @@ console_.live = connectLive("/ws/fleet/", {
     const goal = message.x == null ? null : { name: message.name, x: message.x, y: message.y };
     if (map) map.update(message.id, { goal });
   },
+  "robot.path"(message) { if (map) map.path(message); },
   "lease.update"(message) { table.update(message.id, { holder: message.holder }); },
   "instruction.update"(message) {
     console_.instructionUpdate(message);

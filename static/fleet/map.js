@@ -1,5 +1,5 @@
 // The live map on a canvas: occupancy grid, locations, robots as oriented footprints with names, state glyphs,
-// trails and goals. Drawing is coalesced to one frame per animation tick, however many poses arrive.
+// trails, goals, reserved routes and whom a robot waits for. Drawing is coalesced to one frame per animation tick, however many poses arrive.
 import { STATE_COLOR, STATE_GLYPH } from "./api.js";
 
 const TRAIL_POINTS = 120;
@@ -98,6 +98,15 @@ export class FleetMap {
     this.redraw();
   }
 
+  // A robot's reserved route ([[x, y], ...]; null leaves it; [] clears it) and whom it waits for (execution.traffic).
+  path(message) {
+    const robot = this.robots.get(message.id);
+    if (!robot) return;
+    if (message.path !== null) robot.route = message.path;
+    robot.waitingFor = message.waiting_for;
+    this.redraw();
+  }
+
   where(robot) {
     if (robot.pose) return [robot.pose.x, robot.pose.y, robot.pose.yaw];
     if (robot.start_pose && robot.start_pose.length >= 2) return [robot.start_pose[0], robot.start_pose[1], robot.start_pose[2] || 0];
@@ -120,6 +129,7 @@ export class FleetMap {
     context.drawImage(this.grid, gx, gy, this.map.width * this.map.resolution * this.scale, this.map.height * this.map.resolution * this.scale);
     this.locations.forEach((spot) => this.drawLocation(context, spot));
     this.robots.forEach((robot) => this.drawTrail(context, robot));
+    this.robots.forEach((robot) => this.drawRoute(context, robot));
     this.robots.forEach((robot) => this.drawGoal(context, robot));
     const placed = [];
     const byRank = [...this.robots.values()].sort((a, b) => (LABEL_RANK[b.state] || 0) - (LABEL_RANK[a.state] || 0));
@@ -166,6 +176,22 @@ export class FleetMap {
     });
     context.stroke();
     context.setLineDash([]);
+    context.globalAlpha = 1;
+  }
+
+  drawRoute(context, robot) {
+    const at = this.where(robot);
+    if (!robot.route || !robot.route.length || !at) return;
+    context.strokeStyle = STATE_COLOR[robot.state] || "#546e7a";
+    context.lineWidth = Math.max(2 * this.ratio, 2 * this.reach(robot) * this.scale * 0.35); // the lane it holds
+    context.globalAlpha = 0.3;
+    context.lineJoin = context.lineCap = "round";
+    context.beginPath();
+    [at, ...robot.route].forEach(([x, y], index) => {
+      const [px, py] = this.toScreen(x, y);
+      if (index) context.lineTo(px, py); else context.moveTo(px, py);
+    });
+    context.stroke();
     context.globalAlpha = 1;
   }
 
@@ -228,7 +254,8 @@ export class FleetMap {
     if (!at) return false;
     const [cx, cy] = this.toScreen(at[0], at[1]);
     const top = cy - this.reach(robot) * this.scale - 20 * this.ratio;
-    const label = `${STATE_GLYPH[robot.state] || "•"} ${robot.name}`;
+    const waiting = robot.waitingFor ? ` ⏸ waiting for ${robot.waitingFor}` : "";
+    const label = `${STATE_GLYPH[robot.state] || "•"} ${robot.name}${waiting}`;
     context.font = this.font(12, 700);
     const width = context.measureText(label).width;
     const box = [cx - width / 2 - 3 * this.ratio, top, width + 6 * this.ratio, 16 * this.ratio];

@@ -130,3 +130,29 @@ def test_percentiles_interpolate_and_refuse_bad_q():
     assert summarize([3.0, 1.0, 2.0])["p50"] == 2.0
     with pytest.raises(ValueError, match=r"within 0\.\.100"):
         percentile([1], 101)
+
+
+def test_the_coordination_bench_gets_its_table_plot_and_goals(tmp_path):
+    crowd = {"contacts": 0, "deadlocks": 1, "completion": 1.0, "makespan_s": 90.0, "lone_s": 70.0}
+    data = {"coordination": {"32": {**crowd, "makespan_ratio": 1.29, "robots": 32, "failed": {}}}}
+    results = {
+        "component_coordination": {
+            "title": "component bench bench/coordination.py",
+            "status": "ok",
+            "summary": {
+                "coordination": data["coordination"],
+                "allocation_ms_1000": {"p50": 12.0, "p99": 30.0},
+            },
+            "component": data,
+        }
+    }
+    summary = report.write_all(results, tmp_path, "quick")
+    assert summary["coordination"]["32"]["makespan_ratio"] == 1.29
+    assert summary["coordination"]["2"]["contacts"] is None  # not run: not measured
+    text = (tmp_path / "REPORT.md").read_text()
+    assert "| 32 | 0 | 1 | 1.00 | 90.0 | 70.0 | 1.29 |" in text
+    assert "Allocation among 1,000 robots: p50 12.0 ms, p99 30.0 ms." in text
+    assert (tmp_path / "coordination.png").exists()
+    verdicts = {row["goal"]: row["verdict"] for row in report.goal_rows(summary)}
+    assert verdicts["32 robots on crossing routes: 0 contacts"] == "met"
+    assert verdicts["32 robots on crossing routes: 0 deadlocks"] == "MISSED"

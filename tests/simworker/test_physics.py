@@ -75,3 +75,20 @@ def test_laser_sees_the_wall_and_reports_none_out_of_range(physics):
     assert len(ranges) == 360
     assert ranges[180] == pytest.approx(1.0, abs=0.03)  # facing west: the wall at x = -6
     assert ranges[0] is None  # east: nothing within 3.5 m
+
+
+def test_robot_robot_contacts_are_counted_with_who_touched_whom(physics):
+    a = physics.add_robot("a", model("tiago"), 0.0, -1.5, 0.0)
+    physics.add_robot("b", model("husky"), 1.5, -1.5, 0.0)
+    physics.add_robot("far", model("turtlebot3_burger"), -4.0, 4.0, 0.0)
+    run(physics, 1.0)
+    assert physics.contacts == []  # standing apart: nothing touches
+    run(physics, 3.0, a, (0.5, 0.0))
+    assert [(c.a, c.b) for c in physics.contacts] == [("a", "b")]  # one touch, still pressed: not recounted
+    assert 0.0 < physics.contacts[0].t <= physics.time
+
+
+def test_a_robot_at_a_wall_is_no_contact(physics):
+    husky = physics.add_robot("h", model("husky"), -4.0, -1.0, math.pi)
+    run(physics, 6.0, husky, (1.0, 0.0))
+    assert husky.pose()[0] < -5.4 and physics.contacts == []

@@ -1,0 +1,272 @@
+"""Fleet coordination in the warehouse world: robots sent at once on crossing routes, and allocation at scale.
+
+`python -m bench.coordination [--quick|--full]` writes bench/results/coordination.json:
+{"coordination": {"<n>": {"contacts", "deadlocks", "completion", "makespan_s", "lone_s", "makespan_ratio"},
+ "allocation_ms_1000": {"p50", "p99"}}, ...}.
+
+For n = 2, 4, 8, 16, 32 robots (quick: 2, 4, 8) of mixed models (Huskies, Spots, TurtleBots, TIAGos with
+move_base), each gets a goal on the far side of the warehouse (robots from the west go east and the other way
+round, so the routes cross), submitted together as one instruction per robot through
+execution.instructions.submit, run by the execution engine in this process (threads) against the simulator.
+
+- contacts: robot-robot contacts counted by the simulator's physics (simworker.physics, a pymunk handler);
+- deadlocks: wait-for cycles the traffic layer found (and broke by rerouting one robot), execution.traffic;
+- completion: the share of robots whose instruction succeeded and that stand within 0.3 m of their goal;
+- makespan: simulated seconds from submitting to the last robot done, against the longest lone run: the three
+  robots with the longest estimated trips (planned length / speed) run alone from the same start, the longest
+  of those measured is the lone run. Robots are put back on their start poses between runs (teleported in the
+  simulator, which moves their odometry with them).
+
+Allocation: dispatch.allocate among 1,000 synthetic robots (rows with bindings and poses, no simulator) on the
+warehouse map, for a step to a random place, timed end to end (queries, branch-and-bound path planning).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+import statistics
+import sys
+import tempfile
+import time
+
+from bench import component
+
+RESULT_FILE = "coordination.json"
+MODES = {
+    "quick": {"counts": [2, 4, 8], "time_scale": 2.0, "alloc_rounds": 10, "lone": 2},
+    "full": {"counts": [2, 4, 8, 16, 32], "time_scale": 2.0, "alloc_rounds": 50, "lone": 3},
+}
+WORLD = "warehouse"
+SPEED = "very fast"
+GOAL_BAND = (11.0, 19.0)  # y range of the goals: the cross aisle and the north block's aisles
+FLEET_ORDER = ("husky", "spot", "tb", "tiago")  # robots taken round-robin from these groups: mixed models
+
+
+def setup_django(db_path: str) -> None:
+    os.environ["DATABASE_URL"] = f"sqlite:///{db_path}"
+    os.environ.setdefault("DJANGO_SETTINGS_MODULE", "fleet.settings")
+    import django
+    from django.conf import settings
+    from django.core.management import call_command
+
+    django.setup()
+    call_command("migrate", verbosity=0)
+    settings.FLEET_EXECUTE = "thread"  # the engine runs here, a thread per robot
+    settings.FLEET_EXEC_KEY_PREFIX = f"bench:coord:{os.getpid()}"
+    settings.FLEET_WORLD = WORLD
+
+
+def pick(names: list[str], n: int) -> list[str]:
+    """n robots, round-robin over the model groups (so any n mixes models)."""
+    groups = [[name for name in names if name.startswith(prefix)] for prefix in FLEET_ORDER]
+    out = []
+    while len(out) < n and any(groups):
+        for group in groups:
+            if group and len(out) < n:
+                out.append(group.pop(0))
+    return out
+
+
+def crossing_goals(world, names: list[str], rng: random.Random) -> dict[str, tuple[float, float]]:
+    """Goals on the far side: the westmost robot gets the eastmost goal, and so on, so the routes cross.
+    Goals are free cells for the biggest robot, apart by more than two of its radii."""
+    from fleetcore.catalog import model
+    from fleetcore.planning import Planner
+
+    specs = {r.name: r for r in world.robots}
+    biggest = max(model(specs[n].model).circumscribed_radius for n in names)
+    planner = Planner(world.map, max(model(specs[n].model).inscribed_radius for n in names))
+    goals: list[tuple[float, float]] = []
+    for _ in range(5000):
+        if len(goals) == len(names):
+            break
+        p = (round(rng.uniform(1.0, 29.0), 2), round(rng.uniform(*GOAL_BAND), 2))
+        if planner.free(*planner.to_cell(*p)) and all(math.dist(p, q) > 2 * biggest + 0.4 for q in goals):
+            goals.append(p)
+    west_first = sorted(names, key=lambda n: specs[n].x)
+    return dict(zip(west_first, sorted(goals, reverse=True), strict=True))
+
+
+def register(sim) -> dict:
+    from places.worlds import load_world_into_db
+    from robots.models import Robot
+    from robots.registration import register_endpoints
+
+    results = register_endpoints(list(sim.urls.values()))
+    if not all(r.ok for r in results):
+        raise SystemExit(f"registration failed: {[getattr(r, 'error', r) for r in results]}")
+    load_world_into_db(WORLD)
+    return {robot.name: robot for robot in Robot.objects.all()}
+
+
+def reset(sim, robots: dict, names) -> None:
+    """Put robots back on their start poses (in the simulator, and in the portal's pose store and traffic)."""
+    from execution import traffic
+
+    def teleport() -> None:
+        for name in names:
+            body = sim.fleet.robots[name].body.body
+            x, y, yaw = sim.fleet.robots[name].start
+            body.position, body.angle, body.velocity, body.angular_velocity = (x, y), yaw, (0, 0), 0.0
+            sim.fleet.physics.space.reindex_shapes_for_body(body)
+
+    sim.call(teleport)
+    time.sleep(0.5)
+    for name in names:
+        traffic.release(robots[name], sim.pose(name))
+
+
+def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_s: float) -> dict:
+    """Send every robot to its goal at once; wait; measure contacts, deadlocks, completion, makespan."""
+    from execution import traffic
+    from execution.instructions import submit
+    from execution.models import Instruction
+
+    contacts0, deadlocks0 = len(sim.call(lambda: list(sim.fleet.physics.contacts))), traffic.deadlocks()
+    started = time.time()
+    sent = {}
+    for name, (x, y) in goals.items():
+        step = {"action": "move", "robots": [name], "destination": {"name": f"G-{name}", "x": x, "y": y}}
+        parse = {"type": "I", "valid": True, "needs_user": False, "steps": [{**step, "speed": SPEED}]}
+        sent[name] = submit(f"move {name} to G-{name}", user, parse=parse).pk
+    finished: dict[str, float] = {}
+    while len(finished) < len(sent) and time.time() - started < limit_s:
+        for name, pk in sent.items():
+            if name not in finished and Instruction.objects.get(pk=pk).is_final:
+                finished[name] = time.time()
+        time.sleep(0.2)
+    rows = {name: Instruction.objects.get(pk=pk) for name, pk in sent.items()}
+    reached = 0
+    for name, row in rows.items():
+        execution = row.executions.first()
+        goal = execution.steps[0]["destination"] if execution else None
+        near = goal is not None and math.dist(sim.pose(name)[:2], (goal["x"], goal["y"])) < 0.3
+        reached += int(row.status == "succeeded" and near)
+    makespan = (max(finished.values(), default=time.time()) - started) * time_scale
+    return {
+        "robots": len(goals),
+        "contacts": len(sim.call(lambda: list(sim.fleet.physics.contacts))) - contacts0,
+        "deadlocks": traffic.deadlocks() - deadlocks0,
+        "completion": round(reached / len(goals), 3),
+        "makespan_s": round(makespan, 1),
+        "failed": {name: row.outcome[-200:] for name, row in rows.items() if row.status != "succeeded"},
+    }
+
+
+def estimated_s(robot, start, goal) -> float:
+    from execution import route
+    from fleetcore.steps import speed_factor
+
+    length = route.planned_length(robot, start, goal) or math.dist(start, goal)
+    speed = robot.max_linear * speed_factor(SPEED)
+    if robot.bindings.filter(action="navigate").exists():
+        speed = min(robot.max_linear, 0.22) * 0.5  # as execution.handlers drives nav stacks
+    return length / speed
+
+
+def crossing(cfg: dict) -> dict:
+    from django.contrib.auth.models import User
+
+    from fleetcore.world import load_world
+    from simworker.testing import running_world
+
+    user = User.objects.create_superuser("bench", password="bench-coordination")
+    world, rng, out = load_world(WORLD), random.Random(16), {}
+    scale = cfg["time_scale"]
+    with running_world(WORLD, time_scale=scale) as sim:
+        robots = register(sim)
+        for n in cfg["counts"]:
+            names = pick(sorted(robots), n)
+            goals = crossing_goals(world, names, rng)
+            reset(sim, robots, robots)
+            together = run_together(sim, robots, goals, user, scale, limit_s=400 / scale + 60)
+            trips = sorted(names, key=lambda m: -estimated_s(robots[m], sim.pose(m)[:2], goals[m]))
+            lone = []
+            for name in trips[: cfg["lone"]]:
+                reset(sim, robots, robots)
+                alone = run_together(sim, robots, {name: goals[name]}, user, scale, limit_s=300 / scale + 60)
+                lone.append(alone["makespan_s"])
+            together["lone_s"] = max(lone)
+            together["makespan_ratio"] = round(together["makespan_s"] / max(lone), 2)
+            out[str(n)] = together
+            print(f"[coordination] {n} robots: {together}", flush=True)
+    return out
+
+
+def allocation_ms(rounds: int) -> dict:
+    """dispatch.allocate among 1,000 robots (synthetic rows, poses on free cells of the warehouse)."""
+    from django.core.cache import cache
+
+    import live
+    from execution import dispatch
+    from fleetcore.planning import Planner
+    from fleetcore.steps import Step
+    from fleetcore.world import load_world
+    from places.worlds import load_world_into_db
+    from robots.models import Binding, Robot
+
+    load_world_into_db(WORLD)
+    world, rng = load_world(WORLD), random.Random(1000)
+    planner = Planner(world.map, 0.12)
+    Robot.objects.filter(name__startswith="synthetic").delete()
+    footprint = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
+    rows = Robot.objects.bulk_create(
+        Robot(
+            name=f"synthetic{i:04d}",
+            endpoint=f"ws://synthetic/{i}",
+            footprint=footprint,
+            link_status="online",
+            state="ready",
+        )
+        for i in range(1000)
+    )
+    Binding.objects.bulk_create(
+        Binding(robot=robot, action=role, target=f"/{robot.name}/{role}")
+        for robot in rows
+        for role in ("move", "odometry")
+    )
+    poses = {}
+    for robot in rows:
+        while True:
+            x, y = rng.uniform(0.5, 29.5), rng.uniform(0.5, 19.5)
+            if planner.free(*planner.to_cell(x, y)):
+                break
+        poses[live.POSE_CACHE_KEY.format(id=robot.pk)] = {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}
+    cache.set_many(poses, 600)
+    Robot.objects.exclude(name__startswith="synthetic").update(link_status="offline")
+    times = []
+    for _ in range(rounds):
+        place = rng.choice(world.locations)
+        step = Step.from_dict(
+            {
+                "action": "move",
+                "robots": "any",
+                "destination": {"name": place.name, "x": place.x, "y": place.y},
+            }
+        )
+        t0 = time.perf_counter()
+        dispatch.allocate(step)
+        times.append((time.perf_counter() - t0) * 1000)
+    times.sort()
+    p99 = times[min(len(times) - 1, math.ceil(0.99 * len(times)) - 1)]
+    return {"p50": round(statistics.median(times), 1), "p99": round(p99, 1), "robots": 1000, "rounds": rounds}
+
+
+def main(argv: list[str] | None = None) -> dict:
+    args = component.parser(__doc__.splitlines()[0]).parse_args(argv)
+    cfg = MODES[args.mode]
+    with tempfile.TemporaryDirectory(prefix="bench-coord-") as tmp:
+        setup_django(os.path.join(tmp, "db.sqlite3"))
+        started = time.time()
+        data = {"mode": args.mode, "coordination": crossing(cfg)}
+        data["allocation_ms_1000"] = allocation_ms(cfg["alloc_rounds"])
+        data["seconds"] = round(time.time() - started)
+    component.write(args.out, RESULT_FILE, data)
+    print(f"[coordination] wrote {args.out / RESULT_FILE}", flush=True)
+    return data
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

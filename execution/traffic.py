@@ -1,0 +1,422 @@
+"""Traffic for the robots the portal moves: every motion reserved in space and time, claimed as it is driven.
+
+The algorithms are plain (fleetcore.traffic); this module keeps their state in Redis, where every worker sees it:
+
+1. Reserve (plan). When a robot sets off, its route is planned by space-time A* against the paths the other
+   robots have reserved, the cells they hold now and the robots parked (forever, where they stand); its own
+   timed path is then reserved under its id, until its step ends. First come, first reserved (prioritized
+   planning): a newcomer waits or detours, robots under way are never replanned by it.
+2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the cells its footprint
+   sweeps there. A claim is refused while another robot holds one of those cells or stands on one; the robot
+   then waits where it is and says for whom ("waiting for robot3"). Timing never has to be exact: a robot late
+   or early against its reservation is held back by the claims, so no two robots are ever given the same cells.
+3. Deadlock. Waiting robots note whom they wait for; a cycle of waits (fleetcore.traffic.wait_cycle) is broken
+   by its robot with the highest id, which drops its claim ahead and replans around the robots of the cycle.
+   A robot waiting on one that is parked (not under traffic) goes around it after REROUTE_AFTER_S.
+
+Robots with their own navigation stack take the same route as goals, one stretch at a time, each claimed
+first: their goals never conflict with the reservations (execution.steps.navigate).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import json
+import logging
+import math
+import time
+
+import live
+from execution import coordination, route, spots
+from execution.models import Execution
+from execution.steps import STALL_S, Session, StepFailed, drive, navigate, travel_time
+from fleetcore import motion
+from fleetcore import traffic as plain
+from robots import poses as pose_store
+from robots.models import Robot
+
+log = logging.getLogger(__name__)
+
+LEG_M = 1.2  # m: the longest stretch claimed at once
+RESERVE_MARGIN = 0.05  # m added to a robot's reach radius in reservations and claims
+CLAIM_MARGIN = 0.05  # m more kept between two robots' room when claiming (2 x 0.05 + 0.05 < spots' margin)
+APPROACH_SLACK = 0.03  # m a robot already too close may come nearer (a route planned on cells wobbles)
+PLAN_MARGIN = 0.1  # m more again when planning round robots that stand (robots stop up to 0.2 m off a point)
+CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses after this
+HOLD_S = 4.0  # s the cells another robot holds now are reserved for, in a newcomer's plan
+WAIT_LIMIT_S = 120.0  # s a robot waits for cells before its step fails
+REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before going around it
+BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
+BUSY = ("running", "queued")
+MAX_REROUTES = 4
+MUTEX_TTL_MS = 3000
+WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
+NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
+PLANNED_SPEED = 0.7  # of the commanded speed: turns on the spot and ramps make robots slower than their top
+
+
+class Reroute(Exception):
+    """Replan from here, around these robots (ids), which stand in the way."""
+
+    def __init__(self, around: set[int]) -> None:
+        super().__init__(around)
+        self.around = around
+
+
+def _key(name: str) -> str:
+    return coordination.key("traffic", name)
+
+
+@contextlib.contextmanager
+def mutex(limit_s: float = 5.0):
+    """One planner or claimer at a time across every worker (check-then-write must not interleave)."""
+    redis, token = coordination.connection(), coordination.new_token()
+    deadline = time.monotonic() + limit_s
+    while not redis.set(_key("mutex"), token, nx=True, px=MUTEX_TTL_MS):
+        if time.monotonic() > deadline:
+            raise StepFailed("the traffic table is busy (its lock was not released); try again")
+        time.sleep(0.005)
+    try:
+        yield redis
+    finally:
+        redis.eval(coordination.RELEASE, 1, _key("mutex"), token)
+
+
+def reach(robot: Robot) -> float:
+    """The radius a robot takes in traffic: the farthest corner of its footprint from its centre (as goal spots
+    count it), plus a margin."""
+    return spots.radius_of(robot) + RESERVE_MARGIN
+
+
+def _hash(redis, name: str) -> dict[int, dict]:
+    """A traffic hash's entries by robot id, without the lapsed ones."""
+    now, out = time.time(), {}
+    for field, raw in redis.hgetall(_key(name)).items():
+        entry = json.loads(raw)
+        if entry.get("expires", math.inf) > now:
+            out[int(field)] = entry
+    return out
+
+
+def _put(redis, name: str, robot_id: int, entry: dict) -> None:
+    redis.hset(_key(name), str(robot_id), json.dumps(entry, separators=(",", ":")))
+
+
+def standing(redis, exclude: set[int]) -> list[tuple[plain.Capsule, float]]:
+    """Robots not under traffic control, as discs standing since ever: their live pose, else where they parked,
+    else their start pose. As far as the table knows, these stand where they are for good."""
+    others = {
+        r.pk: r for r in Robot.objects.exclude(pk__in=list(exclude)).only("pk", "footprint", "start_pose")
+    }
+    live_poses = pose_store.last_poses(list(others))
+    parked = _hash(redis, "parked")
+    out = []
+    for pk, robot in others.items():
+        pose = live_poses.get(pk) or parked.get(pk) or _start(robot)
+        if pose is not None:
+            point = (float(pose["x"]), float(pose["y"]))
+            out.append((plain.Capsule(point, point, reach(robot), str(pk)), -math.inf))
+    return out
+
+
+def _start(robot: Robot) -> dict | None:
+    pose = robot.start_pose
+    return {"x": pose[0], "y": pose[1]} if pose and len(pose) >= 2 else None
+
+
+def _capsule(pk: int, entry: dict) -> plain.Capsule:
+    return plain.Capsule(tuple(entry["a"]), tuple(entry["b"]), entry["r"], str(pk))
+
+
+def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
+    """What a newcomer must keep clear of: the paths others reserved and the stretches they hold now (in the
+    table); where those robots will stand once arrived, and the robots standing (exact discs, from when).
+    Robots in `around` count as standing where they hold room now, for good (a reroute goes round them)."""
+    table, still = plain.ReservationTable(), []
+    plans, claims = _hash(redis, "plans"), _hash(redis, "claims")
+    for pk, entry in plans.items():
+        if pk == robot_id or pk in around:
+            continue
+        for c, r, t0, t1 in entry["cells"]:
+            table.reserve(str(pk), [(c, r)], t0, t1)
+        goal = tuple(entry["goal"])
+        still.append((plain.Capsule(goal, goal, entry["r"], str(pk)), entry["at"]))
+    for pk, entry in claims.items():
+        if pk == robot_id:
+            continue
+        held = _capsule(pk, entry)
+        if pk in around:
+            still.append((held, -math.inf))
+        else:
+            table.reserve(str(pk), plain.swept_cells(held.a, held.b, held.r), now - 1.0, now + HOLD_S)
+    busy = busy_ids()
+    for disc, since in standing(redis, {robot_id, *claims, *plans}):
+        if int(disc.label) in busy:  # about to set off: in the way for now, not for good
+            table.reserve(disc.label, plain.footprint_cells(disc.a, disc.r), now - 1.0, now + HOLD_S)
+        else:
+            still.append((disc, since))
+    return table, still
+
+
+def busy_ids() -> set[int]:
+    """Robots with an execution running or queued: one standing now is about to move, not parked."""
+    return set(Execution.objects.filter(status__in=BUSY).values_list("robot_id", flat=True))
+
+
+def pad(t0: float):
+    """Timing slack of a reservation made at t0: half a second, plus a tenth of the time ahead."""
+    return lambda t: 0.5 + 0.1 * max(0.0, t - t0)
+
+
+def plan(
+    robot: Robot, start, goal, speed: float, around: set[int] = frozenset(), progress=None
+) -> list[tuple]:
+    """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t).
+
+    The table is read, then searched outside the lock (a long search must not hold up every claim), then the
+    path is reserved. Two robots planning at the same moment may miss each other's plans: the claims still
+    keep them apart. Without a map, or with no conflict-free plan within the search's bounds, the map route
+    (or the straight line) is reserved as it is.
+    """
+    planner = route.planner_for(robot)
+    radius = reach(robot)
+    now = time.time()
+    path = None
+    if planner is not None:
+        with mutex() as redis:
+            table, still = obstacles(redis, robot.pk, now, around)
+        grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
+        still = [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
+        goal = free_goal(robot, goal, radius, still, planner, start)
+        search = plain.SpaceTimeSearch(_passable(planner), radius, speed, pad(now))
+        path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
+    if path is None:
+        log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
+        goal = tuple(goal)
+        path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
+    with mutex() as redis:
+        _reserve(redis, robot, path, radius, now)
+    return path
+
+
+def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
+    """The goal, or the nearest free spot to it when a robot stands too close (one that stopped a little
+    short of its own spot, say): where this robot can stop clear of everyone."""
+    discs = [plain.Disc(c.a[0], c.a[1], c.r, c.label) for c, _ in still]
+    if plain.clear_of(tuple(goal), radius, discs, 0.05) is None:
+        return tuple(goal)
+    is_free = lambda x, y: planner.free(*planner.to_cell(x, y))  # noqa: E731
+    spot = plain.free_spot(
+        tuple(goal), radius, discs, is_free, prefer=tuple(start), margin=CLAIM_MARGIN + 0.01
+    )
+    if spot is None:
+        return tuple(goal)
+    log.info(
+        "traffic: %s stops at %s, %.2f m from its goal %s (taken)",
+        robot.name,
+        spot,
+        math.dist(spot, goal),
+        goal,
+    )
+    return spot
+
+
+def _passable(planner):
+    def passable(cell) -> bool:
+        return planner.free(*planner.to_cell(*plain.center_of(cell)))
+
+    return passable
+
+
+def _timed(points, speed: float, t0: float) -> list[tuple]:
+    out, t = [(*points[0], t0)], t0
+    for a, b in itertools.pairwise(points):
+        t += math.dist(a, b) / speed
+        out.append((*b, t))
+    return out
+
+
+def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float) -> None:
+    table = plain.ReservationTable()
+    table.reserve_path(str(robot.pk), path, radius, pad(now))
+    cells = [
+        [c, r, round(t0, 2), round(t1, 2)] for (c, r), entries in table.cells.items() for t0, t1, _ in entries
+    ]
+    x, y, at = path[-1]
+    entry = {"cells": cells, "goal": [x, y], "r": radius, "at": at, "expires": at + WAIT_LIMIT_S * 2}
+    _put(redis, "plans", robot.pk, entry)
+
+
+def claim(robot: Robot, start, end) -> int | None:
+    """Claim the stretch from start to end for the robot (replacing its previous claim); the id of a robot in
+    the way (holding room there, or standing there), or None when the claim is the robot's."""
+    radius = reach(robot)
+    with mutex() as redis:
+        claims = {pk: _capsule(pk, e) for pk, e in _hash(redis, "claims").items() if pk != robot.pk}
+        others = [*claims.values(), *(disc for disc, _ in standing(redis, {robot.pk, *claims}))]
+        blocker = plain.first_in_the_way(
+            tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK
+        )
+        if blocker is not None:
+            return int(blocker.label)
+        entry = {"a": list(start), "b": list(end), "r": radius, "expires": time.time() + CLAIM_TTL_S}
+        _put(redis, "claims", robot.pk, entry)
+        redis.hdel(_key("waits"), str(robot.pk))
+    return None
+
+
+def release(robot: Robot, pose) -> None:
+    """The step has ended: drop the robot's reservation, claim and wait; remember where it parked."""
+    redis = coordination.connection()
+    with redis.pipeline() as pipe:
+        for name in ("plans", "claims", "waits"):
+            pipe.hdel(_key(name), str(robot.pk))
+        if pose is not None:
+            pipe.hset(_key("parked"), str(robot.pk), json.dumps({"x": pose[0], "y": pose[1]}))
+        pipe.execute()
+    if pose is not None:
+        pose_store.store_pose(robot.pk, pose)
+    live.path(robot, [], None)
+
+
+def deadlocks() -> int:
+    """Wait-for cycles found and broken so far (the bench reads it)."""
+    return int(coordination.connection().get(_key("deadlocks")) or 0)
+
+
+def wait_for(session: Session, start, end) -> None:
+    """Claim the stretch, waiting while another robot is in the way; raise Reroute to break a deadlock or to
+    go around a robot that is not under way; StepFailed after WAIT_LIMIT_S."""
+    robot, redis = session.robot, coordination.connection()
+    started, same_since, last, name = time.monotonic(), time.monotonic(), None, ""
+    while (blocker := claim(robot, start, end)) is not None:
+        now = time.monotonic()
+        if blocker != last:
+            same_since, last = now, blocker
+            name = Robot.objects.filter(pk=blocker).values_list("name", flat=True).first() or f"#{blocker}"
+            log.debug("traffic: %s waits for %s to go from %s to %s", robot.name, name, start, end)
+            live.path(robot, None, name)
+            session.link.halt()
+        _put(redis, "waits", robot.pk, {"for": blocker, "expires": time.time() + 2.0})
+        _renew(redis, robot.pk)
+        _check_deadlock(redis, robot.pk)
+        if now - same_since > REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
+            log.info("traffic: %s goes round %s, which stands in its way", robot.name, name)
+            raise Reroute({blocker})
+        if now - started > WAIT_LIMIT_S:
+            raise StepFailed(f"{robot.name}: waited {WAIT_LIMIT_S:.0f} s for {name} to make way")
+        session.check()
+        session.pose()  # paced by odometry; a robot waiting still reports where it is
+    if last is not None:
+        live.path(robot, None, None)
+
+
+def _parked(redis, blocker: int, waited: float) -> bool:
+    """Whether a robot in the way is parked (go round it), not one under way or about to be (wait for it)."""
+    if blocker in _hash(redis, "claims"):
+        return False
+    return blocker not in busy_ids() or waited > BUSY_WAIT_S
+
+
+def _renew(redis, robot_id: int) -> None:
+    """Keep the robot's claim (where it stands and what it holds) alive while it waits."""
+    raw = redis.hget(_key("claims"), str(robot_id))
+    if raw is not None:
+        _put(redis, "claims", robot_id, {**json.loads(raw), "expires": time.time() + CLAIM_TTL_S})
+
+
+def _check_deadlock(redis, robot_id: int) -> None:
+    """If this robot is in a cycle of waits and has the highest id in it, it gives way: Reroute."""
+    waits = {str(pk): str(entry["for"]) for pk, entry in _hash(redis, "waits").items()}
+    cycle = plain.wait_cycle(waits, str(robot_id))
+    if cycle and max(map(int, cycle)) == robot_id:
+        redis.incr(_key("deadlocks"))
+        log.info("traffic: deadlock among robots %s broken by %s", cycle, robot_id)
+        raise Reroute({int(pk) for pk in cycle} - {robot_id})
+
+
+def stretches(path: list[tuple]) -> list[tuple]:
+    """The route cut into stretches of at most LEG_M: [(x, y, t, hold)], hold True for a planned wait."""
+    out = []
+    for a, b in itertools.pairwise(path):
+        if a[:2] == b[:2]:
+            out.append((*b, True))
+            continue
+        n = max(1, math.ceil(math.dist(a[:2], b[:2]) / LEG_M))
+        for i in range(1, n + 1):
+            f = i / n
+            out.append((a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f, a[2] + (b[2] - a[2]) * f, False))
+    return out
+
+
+def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bool = False) -> str:
+    """Drive (or, with its own nav stack, navigate) the robot to goal along a reserved route, stretch by
+    stretch, each claimed first; replan around a deadlock or a robot standing in the way.
+
+    Returns "" at the goal, or words on the free spot it stopped at when a robot stood on the goal."""
+    robot = session.robot
+    speed = limits.linear * factor * PLANNED_SPEED
+    around: set[int] = set()
+    here = session.pose()[:2]
+    claim(robot, here, here)  # under traffic from now on: others wait for it, never go round it as parked
+    try:
+        for _ in range(MAX_REROUTES + 1):
+            pose = session.pose()
+            path = plan(robot, pose[:2], goal, speed, around, progress=session.check)
+            try:
+                _follow(session, path, limits, factor, nav)
+                return _moved(tuple(goal), path[-1][:2])
+            except Reroute as exc:
+                around |= exc.around
+                here = session.pose()[:2]
+                claim(robot, here, here)  # keep only where it stands: the others may go on
+        raise StepFailed(f"{robot.name}: no way through after {MAX_REROUTES} reroutes")
+    finally:
+        release(robot, session.link.poses.value)
+
+
+def _moved(goal, end) -> str:
+    distance = math.dist(goal, end)
+    if distance < 0.05:
+        return ""
+    return f" (its spot was taken: it stopped {distance:.1f} m {plain.compass(goal, end)} of it)"
+
+
+def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
+    """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
+    asked for, or the free spot next to it when that was taken)."""
+    robot, goal = session.robot, path[-1][:2]
+    legs = stretches(path)
+    for i, (x, y, t, hold) in enumerate(legs):
+        live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
+        pose = session.pose()
+        if hold:
+            _hold(session, t)
+            continue
+        wait_for(session, pose[:2], (x, y))
+        last = i == len(legs) - 1
+        target = tuple(goal) if last else (x, y)
+        distance = math.dist(pose[:2], target)
+        if nav:
+            limit = travel_time(distance * 1.5, math.pi, limits, factor)
+            navigate(session, *target, limit, stall_s=NAV_STALL_S)
+        else:
+            tolerance = motion.TOLERANCE if last else WAYPOINT_TOLERANCE
+            controller = motion.GoToGoal(target, limits, factor, tolerance)
+            drive(
+                session,
+                controller,
+                travel_time(distance, math.pi, limits, factor),
+                stall_s=STALL_S,
+                goal=target,
+            )
+
+
+def _hold(session: Session, until: float) -> None:
+    """A wait in the plan: stay until its time (another robot passes first), at most HOLD_S beyond now."""
+    deadline = min(until, time.time() + HOLD_S)
+    session.link.halt()
+    while time.time() < deadline:
+        session.check()
+        session.pose()

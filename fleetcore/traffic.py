@@ -1,0 +1,451 @@
+"""Traffic for a fleet on one map (plain code, no Django): free goal spots, a space-time reservation table,
+space-time A* (cooperative A*, prioritized planning), and wait-for cycles.
+
+Why prioritized planning on a reservation table (Silver 2005, "Cooperative Pathfinding"; Open-RMF's traffic
+schedule is the same idea) rather than conflict-based search: robots get instructions one at a time, each
+instruction's robots are planned when it is dispatched, and robots already under way must not be replanned by a
+newcomer. Prioritized planning fits that arrival order (first come, first reserved), costs one search per robot,
+and a robot that cannot find a conflict-free plan waits or detours. Its known gap, a deadlock when robots wait on
+each other at run time, is closed by the wait-for cycle check (`wait_cycle`) and a reroute.
+
+Cells are TRAFFIC_CELL squares of the world frame; a robot occupies every cell within its radius of its centre.
+Time is in seconds on one clock shared by everyone who reserves (the execution engine uses wall time).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+
+TRAFFIC_CELL = 0.2  # m: the reservation table's grid
+SPOT_MARGIN = 0.3  # m kept between two robots' discs at their goals (more than execution.traffic plans with)
+SPOT_STEP = 0.1  # m between the rings searched for a free spot
+SPOT_SEARCH_M = 4.0  # m: how far from the place a free spot is looked for
+FOREVER = math.inf
+COMPASS = ("east", "north-east", "north", "north-west", "west", "south-west", "south", "south-east")
+
+Point = tuple[float, float]
+Cell = tuple[int, int]
+
+
+@dataclass(frozen=True)
+class Disc:
+    """Something round that takes room: a parked robot, another robot's goal. label names it for a person."""
+
+    x: float
+    y: float
+    r: float
+    label: str = ""
+
+
+def clear_of(point: Point, radius: float, discs: Iterable[Disc], margin: float = SPOT_MARGIN) -> Disc | None:
+    """The first disc a robot of this radius at point would touch (within margin); None when clear."""
+    for disc in discs:
+        if math.dist(point, (disc.x, disc.y)) < radius + disc.r + margin:
+            return disc
+    return None
+
+
+def free_spot(
+    target: Point,
+    radius: float,
+    taken: Sequence[Disc],
+    is_free: Callable[[float, float], bool],
+    prefer: Point | None = None,
+    step: float = SPOT_STEP,
+    search_m: float = SPOT_SEARCH_M,
+    margin: float = SPOT_MARGIN,
+) -> Point | None:
+    """The spot nearest to target where a robot of this radius stands on free ground, clear of every taken disc.
+
+    Rings of growing radius are searched; on the first ring with free spots the one nearest to `prefer` (the
+    robot's position) wins, so the robot stops on its own side and does not drive round the place. None when
+    nothing within search_m is free.
+    """
+    for ring in range(round(search_m / step) + 1):
+        r = ring * step
+        count = 1 if ring == 0 else max(8, math.ceil(2 * math.pi * r / step))
+        spots = [
+            (round(target[0] + r * math.cos(a), 3), round(target[1] + r * math.sin(a), 3))
+            for a in _angles(count)
+        ]
+        fits = [p for p in spots if is_free(*p) and clear_of(p, radius, taken, margin) is None]
+        if fits:
+            return min(fits, key=lambda p: math.dist(p, prefer)) if prefer else fits[0]
+    return None
+
+
+def _angles(count: int) -> list[float]:
+    return [2 * math.pi * i / count for i in range(count)]
+
+
+def compass(origin: Point, point: Point) -> str:
+    """The direction from origin to point in words ("east", "north-west")."""
+    angle = math.atan2(point[1] - origin[1], point[0] - origin[0])
+    return COMPASS[round(angle / (math.pi / 4)) % 8]
+
+
+def segment_distance(p: Point, q: Point, a: Point, b: Point) -> float:
+    """The least distance between segments pq and ab (points are segments of length zero)."""
+    if _cross(p, q, a, b):
+        return 0.0
+    return min(
+        _point_segment(p, a, b), _point_segment(q, a, b), _point_segment(a, p, q), _point_segment(b, p, q)
+    )
+
+
+def _point_segment(p: Point, a: Point, b: Point) -> float:
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    length2 = dx * dx + dy * dy
+    f = 0.0 if length2 == 0 else max(0.0, min(1.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2))
+    return math.dist(p, (a[0] + f * dx, a[1] + f * dy))
+
+
+def _cross(p: Point, q: Point, a: Point, b: Point) -> bool:
+    def side(o, u, v):
+        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
+
+    d1, d2, d3, d4 = side(a, b, p), side(a, b, q), side(p, q, a), side(p, q, b)
+    return (d1 * d2 < 0) and (d3 * d4 < 0)
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """The room a robot takes for a stretch of its route: every point within r of the segment a-b (a disc
+    when a == b: a robot standing). label names the robot."""
+
+    a: Point
+    b: Point
+    r: float
+    label: str = ""
+
+
+def approaches(
+    p0: Point, p1: Point, radius: float, other: Capsule, margin: float = 0.0, slack: float = 1e-6
+) -> bool:
+    """Whether a robot of this radius moving from p0 to p1 comes nearer to `other` than their radii (plus
+    margin) allow, and nearer than it already is (by more than slack). A robot already close may still move
+    away or sideways."""
+    near = segment_distance(p0, p1, other.a, other.b)
+    return near < radius + other.r + margin and near < segment_distance(p0, p0, other.a, other.b) - slack
+
+
+def first_in_the_way(
+    p0: Point, p1: Point, radius: float, others, margin: float = 0.0, slack: float = 1e-6
+) -> Capsule | None:
+    """The first capsule a move from p0 to p1 would come too near (approaches); None when the way is clear."""
+    for other in others:
+        if approaches(p0, p1, radius, other, margin, slack):
+            return other
+    return None
+
+
+def disc_offsets(radius: float, cell: float = TRAFFIC_CELL) -> list[Cell]:
+    """The cell offsets a disc of this radius centred in a cell may touch (cells whose square it reaches)."""
+    n = math.ceil(radius / cell) + 1
+    out = []
+    for dc in range(-n, n + 1):
+        for dr in range(-n, n + 1):
+            gap_x, gap_y = max(0.0, (abs(dc) - 0.5) * cell), max(0.0, (abs(dr) - 0.5) * cell)
+            if math.hypot(gap_x, gap_y) <= radius:
+                out.append((dc, dr))
+    return out
+
+
+def cell_of(point: Point, cell: float = TRAFFIC_CELL) -> Cell:
+    return math.floor(point[0] / cell), math.floor(point[1] / cell)
+
+
+def center_of(c: Cell, cell: float = TRAFFIC_CELL) -> Point:
+    return (c[0] + 0.5) * cell, (c[1] + 0.5) * cell
+
+
+def footprint_cells(point: Point, radius: float) -> set[Cell]:
+    """Every cell a robot of this radius standing at point touches."""
+    c, r = cell_of(point)
+    return {(c + dc, r + dr) for dc, dr in disc_offsets(radius)}
+
+
+def swept_cells(a: Point, b: Point, radius: float, step: float = TRAFFIC_CELL / 2) -> set[Cell]:
+    """Every cell a robot of this radius touches driving the straight leg from a to b."""
+    n = max(1, math.ceil(math.dist(a, b) / step))
+    out: set[Cell] = set()
+    for i in range(n + 1):
+        out |= footprint_cells((a[0] + (b[0] - a[0]) * i / n, a[1] + (b[1] - a[1]) * i / n), radius)
+    return out
+
+
+@dataclass
+class ReservationTable:
+    """Who holds which cell when: {cell: [(t0, t1, robot), ...]}; t1 may be FOREVER (parked at its goal)."""
+
+    cells: dict[Cell, list[tuple[float, float, str]]] = field(default_factory=dict)
+
+    def reserve(self, robot: str, cells: Iterable[Cell], t0: float, t1: float) -> None:
+        for c in cells:
+            self.cells.setdefault(c, []).append((t0, t1, robot))
+
+    def release(self, robot: str) -> None:
+        for c in list(self.cells):
+            kept = [entry for entry in self.cells[c] if entry[2] != robot]
+            if kept:
+                self.cells[c] = kept
+            else:
+                del self.cells[c]
+
+    def holder(self, cells: Iterable[Cell], t0: float, t1: float, robot: str = "") -> str | None:
+        """Someone else holding any of these cells at a time overlapping [t0, t1]; None when all are free."""
+        for c in cells:
+            for a, b, who in self.cells.get(c, ()):
+                if who != robot and a < t1 and t0 < b:
+                    return who
+        return None
+
+    def free_after(self, cells: Iterable[Cell], t: float, robot: str = "") -> bool:
+        """Whether nobody else holds these cells at any time from t on (a robot may park there)."""
+        return self.holder(cells, t, FOREVER, robot) is None
+
+    def reserve_path(
+        self, robot: str, path: Sequence[tuple[float, float, float]], radius: float, pad
+    ) -> None:
+        """Reserve a timed path [(x, y, t), ...]: each stretch of each leg at the time the robot passes it,
+        padded by pad(t). Where it then stays is not a cell reservation: give it to later planners as a
+        standing disc from its arrival on (SpaceTimeSearch.plan's `standing`), which is exact."""
+        for a, b in itertools.pairwise(path):
+            for cells, t0, t1 in leg_slots(a, b, radius, pad):
+                self.reserve(robot, cells, t0, t1)
+
+    def leg_free(self, a, b, radius: float, pad, robot: str = "") -> bool:
+        """Whether the timed leg a -> b ((x, y, t) each) meets nobody else's reservation."""
+        return all(
+            self.holder(cells, t0, t1, robot) is None for cells, t0, t1 in leg_slots(a, b, radius, pad)
+        )
+
+
+def leg_slots(a, b, radius: float, pad, step: float = TRAFFIC_CELL):
+    """(cells, t0, t1) along a timed straight leg: the footprint over each stretch of `step` metres, for the
+    time the robot is in that stretch at constant speed, widened by pad(t)."""
+    (x0, y0, ta), (x1, y1, tb) = a, b
+    n = max(1, math.ceil(math.dist((x0, y0), (x1, y1)) / step))
+    for i in range(n):
+        p, q = (
+            (x0 + (x1 - x0) * i / n, y0 + (y1 - y0) * i / n),
+            (
+                x0 + (x1 - x0) * (i + 1) / n,
+                y0 + (y1 - y0) * (i + 1) / n,
+            ),
+        )
+        t0, t1 = ta + (tb - ta) * i / n, ta + (tb - ta) * (i + 1) / n
+        yield swept_cells(p, q, radius), t0 - pad(t0), t1 + pad(t1)
+
+
+class Clearance:
+    """How far a robot of some radius keeps from the robots standing (exact discs, each from its time on).
+
+    A move may not end nearer to a standing robot than their radii allow unless it ends no nearer than it
+    starts: a robot that starts too close (robots parked side by side) may still move away."""
+
+    def __init__(self, standing: Sequence[tuple[Capsule, float]], radius: float, pad, exact=None) -> None:
+        self.standing, self.radius, self.pad = list(standing), radius, pad
+        self.exact: dict[Cell, Point] = dict(exact or {})  # cells measured at a point, not their centre
+        self._gaps: dict[Cell, list[tuple[float, float]]] = {}
+
+    def gaps(self, c: Cell) -> list[tuple[float, float]]:
+        """(since, gap) for each standing robot near the cell's centre: gap < 0 means too close."""
+        if c not in self._gaps:
+            p = self.exact.get(c) or center_of(c)
+            self._gaps[c] = [
+                (since, gap)
+                for disc, since in self.standing
+                if (gap := segment_distance(p, p, disc.a, disc.b) - disc.r - self.radius) < TRAFFIC_CELL * 2
+            ]
+        return self._gaps[c]
+
+    def gap(self, c: Cell, t: float) -> float:
+        """The least gap at the cell to the robots standing by time t (a wide gap when none is near)."""
+        return min((gap for since, gap in self.gaps(c) if since <= t + self.pad(t)), default=TRAFFIC_CELL * 2)
+
+    def may_move(self, c: Cell, n: Cell, t: float) -> bool:
+        end = self.gap(n, t)
+        return end >= 0 or end >= self.gap(c, t) - 1e-9
+
+    def stays(self, c: Cell, t: float) -> bool:
+        """Whether the robot may stay at the cell from t on: no robot will come to stand too close later."""
+        return all(gap >= 0 for since, gap in self.gaps(c) if since > t)
+
+    def leg_clear(self, a, b) -> bool:
+        """Whether the straight timed leg a -> b keeps clear of the robots standing by its end."""
+        t = b[2]
+        active = [disc for disc, since in self.standing if since <= t + self.pad(t)]
+        return first_in_the_way(a[:2], b[:2], self.radius, active) is None
+
+
+MOVES = [(dc, dr, math.hypot(dc, dr)) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if dc or dr]
+
+
+@dataclass
+class SpaceTimeSearch:
+    """Space-time A* on the traffic grid for one robot, against a reservation table (cooperative A*).
+
+    passable(cell): the robot may stand there (the map, inflated by its size). speed: m/s it is planned at.
+    pad(t): seconds added on both sides of each reserved interval (timing uncertainty grows with time).
+    A state is (cell, time); moves go to the 8 neighbours or wait one tick where it stands. The heuristic is the
+    exact distance on the static grid (one Dijkstra from the goal), so the search only explores detours and
+    waits that the reservations force.
+    """
+
+    passable: Callable[[Cell], bool]
+    radius: float
+    speed: float
+    pad: Callable[[float], float] = lambda t: 0.5
+    max_expansions: int = 60_000
+    horizon_s: float = 240.0
+
+    def plan(
+        self,
+        start: Point,
+        goal: Point,
+        t0: float,
+        table: ReservationTable,
+        robot: str = "",
+        standing: Sequence[tuple[Capsule, float]] = (),
+        progress: Callable[[], None] | None = None,
+    ) -> list[tuple[float, float, float]] | None:
+        """A timed path [(x, y, t), ...] from start to goal avoiding the table's reservations at their times
+        and the robots standing, exactly, as discs (each from its time `since` on: a robot parked now has
+        -inf, another's goal the time it arrives there), ending where the robot may stay; consecutive equal
+        points are waits. The cells the robot stands on at the start are its own until it moves.
+        progress() is called every few thousand expansions (keep a lock alive, honour a stop). None: no plan."""
+        s, g = cell_of(start), cell_of(goal)
+        distance = self._distances(g, s)
+        if s not in distance:
+            return None
+        tick = TRAFFIC_CELL / self.speed
+        offsets = disc_offsets(self.radius)
+        near = Clearance(standing, self.radius, self.pad, {s: start, g: goal})
+        self._near = near
+
+        def cells(c: Cell) -> list[Cell]:
+            return [(c[0] + dc, c[1] + dr) for dc, dr in offsets]
+
+        mine = set(cells(s))
+        counter = itertools.count()
+        start_state = (s, 0)
+        openq = [(distance[s] * tick, next(counter), start_state, t0)]
+        parent: dict = {start_state: None}
+        times = {start_state: t0}
+        for expansions in range(self.max_expansions):
+            if not openq:
+                break
+            if progress is not None and expansions % 2000 == 1999:
+                progress()
+            _, _, state, t = heapq.heappop(openq)
+            c = state[0]
+            if c == g and table.free_after(cells(c), t - self.pad(t), robot) and near.stays(c, t):
+                return self._timed(state, parent, times, start, goal, table, robot)
+            if t - t0 > self.horizon_s:
+                continue
+            for dc, dr, d in [*MOVES, (0, 0, 1.0)]:
+                n = (c[0] + dc, c[1] + dr)
+                if n not in distance:
+                    continue
+                t1 = t + d * tick
+                here = set(cells(c)) if (dc, dr) == (0, 0) else set(cells(c)) | set(cells(n))
+                if c in mine:  # still within where it stood: that room is its own (neighbours may be close)
+                    here -= mine
+                if here and table.holder(here, t - self.pad(t), t1 + self.pad(t1), robot) is not None:
+                    continue
+                if not near.may_move(c, n, t1):
+                    continue
+                nxt = (n, round((t1 - t0) / tick))
+                if nxt in parent:
+                    continue
+                parent[nxt], times[nxt] = state, t1
+                heapq.heappush(openq, (t1 - t0 + distance[n] * tick, next(counter), nxt, t1))
+        return None
+
+    def _distances(self, goal: Cell, start: Cell) -> dict[Cell, float]:
+        """Cells from which the goal is reachable on the static grid, with their distance to it (in cells)."""
+        if not self.passable(goal):
+            return {}
+        dist = {goal: 0.0}
+        heap = [(0.0, goal)]
+        while heap:
+            d, c = heapq.heappop(heap)
+            if d > dist.get(c, math.inf):
+                continue
+            for dc, dr, step in MOVES:
+                n = (c[0] + dc, c[1] + dr)
+                nd = d + step
+                if nd < dist.get(n, math.inf) and (self.passable(n) or n == start):
+                    dist[n] = nd
+                    heapq.heappush(heap, (nd, n))
+        return dist
+
+    def _timed(self, state, parent, times, start: Point, goal: Point, table, robot):
+        """The timed points of the found path, from the real start to the real goal."""
+        chain = []
+        while state is not None:
+            chain.append(state)
+            state = parent[state]
+        chain.reverse()
+        points = [(*center_of(c), times[st]) for st in chain for c in [st[0]]]
+        points[0] = (start[0], start[1], points[0][2])
+        points[-1] = (goal[0], goal[1], points[-1][2])
+        return self._shortcut(simplify(points), table, robot)
+
+    def _shortcut(self, points, table: ReservationTable, robot: str):
+        """Straighten the grid's staircase: join two points by a straight leg when no wait lies between and
+        the leg is on free ground and free of reservations over the time between them (string pulling)."""
+        out, i = [points[0]], 0
+        while i < len(points) - 1:
+            j = i + 1
+            for k in range(len(points) - 1, i + 1, -1):
+                if self._straight_ok(points[i : k + 1], table, robot):
+                    j = k
+                    break
+            out.append(points[j])
+            i = j
+        return out
+
+    def _straight_ok(self, run, table: ReservationTable, robot: str) -> bool:
+        (x0, y0, _), (x1, y1, _) = run[0], run[-1]
+        if any(a[:2] == b[:2] for a, b in itertools.pairwise(run)):
+            return False  # a wait lies between: keep it
+        n = max(1, math.ceil(math.dist((x0, y0), (x1, y1)) / (TRAFFIC_CELL / 2)))
+        if not all(
+            self.passable(cell_of((x0 + (x1 - x0) * i / n, y0 + (y1 - y0) * i / n))) for i in range(n + 1)
+        ):
+            return False
+        if not self._near.leg_clear(run[0], run[-1]):
+            return False
+        return table.leg_free(run[0], run[-1], self.radius, self.pad, robot)
+
+
+def simplify(points: list[tuple[float, float, float]]) -> list[tuple[float, float, float]]:
+    """Drop the middle points of straight runs (same direction, no wait), keeping every turn and wait."""
+    if len(points) < 3:
+        return points
+    out = [points[0]]
+    for prev, cur, nxt in zip(points, points[1:], points[2:], strict=False):
+        d1 = (round(cur[0] - prev[0], 6), round(cur[1] - prev[1], 6))
+        d2 = (round(nxt[0] - cur[0], 6), round(nxt[1] - cur[1], 6))
+        if d1 != d2 or d1 == (0.0, 0.0):
+            out.append(cur)
+    out.append(points[-1])
+    return out
+
+
+def wait_cycle(waits: dict[str, str], start: str) -> list[str] | None:
+    """The cycle of robots waiting on each other that start is in ({robot: the robot it waits for}); None
+    when start's chain of waits ends at a robot that waits for nobody (no deadlock)."""
+    seen, robot = [], start
+    while robot in waits and robot not in seen:
+        seen.append(robot)
+        robot = waits[robot]
+    if robot == start and seen:
+        return seen
+    return None

@@ -1,0 +1,158 @@
+"""Allocation: an instruction that names no robot goes to the one best robot (or the selected ones), and waits
+when nobody is free; goals taken by another robot become the nearest free spot, and the person is told."""
+
+import math
+
+import pytest
+from django.core.cache import cache
+
+import live
+from execution import dispatch, scheduler
+from execution.instructions import submit
+from execution.models import Execution, Instruction
+from fleetcore.traffic import SPOT_MARGIN
+from places.worlds import load_world_into_db
+from robots.models import Binding, Robot
+from tests.execution.helpers import parse, step
+
+SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
+HUSKY = [[-0.5, -0.34], [-0.5, 0.34], [0.5, 0.34], [0.5, -0.34]]
+D = (5.0, 5.0)  # inside Room 1 of the paper world: its door faces west, its south wall (y = 3) is solid
+
+
+@pytest.fixture
+def fleet(db):
+    """The paper world's map in the database, and a helper that adds a ready robot with a pose."""
+    load_world_into_db("paper")
+    made = []
+
+    def add(name, x, y, footprint=SQUARE, roles=("move", "odometry"), state="ready"):
+        robot = Robot.objects.create(
+            name=name, endpoint=f"ws://sim/{name}", footprint=footprint, link_status="online", state=state
+        )
+        for role in roles:
+            Binding.objects.create(robot=robot, action=role, target=f"/{name}/{role}")
+        cache.set(live.POSE_CACHE_KEY.format(id=robot.pk), {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}, 60)
+        made.append(robot)
+        return robot
+
+    yield add
+    cache.delete_many([live.POSE_CACHE_KEY.format(id=robot.pk) for robot in made])
+
+
+@pytest.fixture
+def no_runner(exec_settings, monkeypatch):
+    """Instructions are stored and dispatched; nothing starts running them."""
+    monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)
+
+
+def to(x, y, name="P", task=None, action="move"):
+    return step("any", x, y, name, task=task, action=action)
+
+
+def test_the_shortest_planned_path_wins_not_the_straight_line(fleet, fleet_admin):
+    behind_wall = fleet("south", 4.5, 2.4)  # 2.6 m from D as the crow flies, ~5 m round by the door
+    fleet("west", 1.0, 4.6)  # 4.0 m from D, and the path is about as long
+    robot, why = dispatch.allocate(dispatch.Step.from_dict(to(*D, "D")), fleet_admin)
+    assert robot.name == "west"
+    assert why.startswith("west: nearest free robot, 4.") and "south" in why
+    assert math.dist((4.5, 2.4), D) < 3.0 and behind_wall.name in why
+
+
+def test_busy_held_and_unbound_robots_are_passed_over_with_the_reason(fleet, fleet_admin):
+    fleet("near", 4.0, 4.5, state="motion")
+    fleet("blind", 4.2, 4.6, roles=("move",))
+    fleet("far", -4.0, -4.0)
+    robot, why = dispatch.allocate(dispatch.Step.from_dict(to(*D, "D")), fleet_admin)
+    assert robot.name == "far"
+    assert "near is busy (motion)" in why and "blind has no odometry or pose bound" in why
+
+
+def test_ties_go_to_the_fuller_battery(fleet, fleet_admin):
+    low = fleet("low", 0.0, -1.0)
+    high = fleet("high", 0.0, 1.0)
+    low.description, high.description = {"battery": 20}, {"battery": 90}
+    low.save(), high.save()
+    robot, why = dispatch.allocate(dispatch.Step.from_dict(to(-1.0, 0.0, "Q")), fleet_admin)
+    assert robot.name == "high" and "battery 90%" in why
+
+
+def test_an_instruction_naming_no_robot_moves_one_and_says_which_and_why(fleet, fleet_admin, no_runner):
+    fleet("a", -4.0, -4.0)
+    fleet("b", 1.0, 4.6)
+    instruction = submit("go to D", fleet_admin, parse=parse(to(*D, "D")))
+    robots = list(Execution.objects.filter(instruction=instruction).values_list("robot__name", flat=True))
+    assert robots == ["b"]
+    assert instruction.status == "queued" and instruction.outcome.startswith("b: nearest free robot")
+
+
+def test_the_robots_selected_on_the_page_take_an_instruction_naming_none(fleet, fleet_admin, no_runner):
+    fleet("a", -4.0, -4.0)
+    near = fleet("b", 1.0, 4.6)
+    far = fleet("c", -4.0, 4.0)
+    instruction = submit("go to D", fleet_admin, parse=parse(to(*D, "D")), robot_ids=[far.pk])
+    assert list(instruction.robots.values_list("name", flat=True)) == ["c"]
+    named = submit("move b to D", fleet_admin, parse=parse(step(["b"], *D, "D")), robot_ids=[far.pk])
+    assert list(named.robots.values_list("pk", flat=True)) == [near.pk]  # the text's name wins
+
+
+@pytest.mark.django_db(transaction=True)  # the scheduler's tick closes old connections
+def test_nobody_free_the_instruction_waits_and_is_allocated_when_one_is(fleet, fleet_admin, no_runner):
+    busy = fleet("busy", 1.0, 4.6, state="motion")
+    instruction = submit("go to D", fleet_admin, parse=parse(to(*D, "D")))
+    assert instruction.status == "queued" and not instruction.executions.exists()
+    assert (
+        instruction.outcome.startswith("waiting for a free robot")
+        and "busy is busy (motion)" in instruction.outcome
+    )
+    assert dispatch.retry() == []  # still busy: still waiting
+    Robot.objects.filter(pk=busy.pk).update(state="ready")
+    report = scheduler.tick(scheduler.Clock())
+    assert report["allocated"] == [instruction.pk]
+    instruction.refresh_from_db()
+    assert list(instruction.robots.values_list("name", flat=True)) == ["busy"]
+    assert instruction.outcome.startswith("busy: nearest free robot")
+
+
+def test_no_capable_robot_is_a_refusal_not_a_wait(fleet, fleet_admin):
+    fleet("blind", 1.0, 4.6, roles=("move",))
+    instruction = submit("go to D", fleet_admin, parse=parse(to(*D, "D")))
+    assert instruction.status == "refused" and "blind has no odometry or pose bound" in instruction.outcome
+
+
+def test_a_waiting_instruction_is_refused_after_the_limit(fleet, fleet_admin, no_runner):
+    import datetime
+
+    fleet("busy", 1.0, 4.6, state="motion")
+    instruction = submit("go to D", fleet_admin, parse=parse(to(*D, "D")))
+    later = instruction.received_at + datetime.timedelta(seconds=dispatch.WAIT_LIMIT_S + 1)
+    dispatch.retry(later)
+    instruction.refresh_from_db()
+    assert instruction.status == "refused" and "no robot became free within 10 min" in instruction.outcome
+
+
+def test_a_goal_where_a_robot_is_parked_becomes_the_nearest_free_spot(fleet, fleet_admin, no_runner):
+    parked = fleet("parked", 2.0, 2.0, footprint=HUSKY)  # on A
+    fleet("tb", -2.0, 2.0)
+    instruction = submit("move tb to A", fleet_admin, parse=parse(step(["tb"], 2.0, 2.0, "A")))
+    goal = Execution.objects.get(instruction=instruction).steps[0]["destination"]
+    gap = math.dist((goal["x"], goal["y"]), (2.0, 2.0))
+    assert gap >= dispatch.spots.radius_of(parked) + 0.14 + SPOT_MARGIN - 1e-6  # clear of the Husky's corners
+    assert gap < 1.2 and goal["around"] == "A"
+    assert goal["x"] < 2.0  # on tb's side (it comes from the west)
+    assert "A is taken by parked: tb goes to a free spot" in instruction.outcome
+    assert f"{gap:.1f} m" in instruction.outcome and "west of A" in instruction.outcome
+
+
+def test_two_instructions_to_one_place_never_share_the_spot(fleet, fleet_admin, no_runner):
+    """The reported bug: "move tb3_1 to A" then "move tb3_2 to A" ended on one spot."""
+    fleet("tb3_1", -2.0, 2.0)
+    fleet("tb3_2", -2.0, -2.0)
+    first = submit("move tb3_1 to A", fleet_admin, parse=parse(step(["tb3_1"], 2.0, 2.0, "A")))
+    second = submit("move tb3_2 to A", fleet_admin, parse=parse(step(["tb3_2"], 2.0, 2.0, "A")))
+    a = Execution.objects.get(instruction=first).steps[0]["destination"]
+    b = Execution.objects.get(instruction=second).steps[0]["destination"]
+    assert (a["x"], a["y"]) == (2.0, 2.0)
+    assert math.dist((a["x"], a["y"]), (b["x"], b["y"])) >= 2 * math.hypot(0.1, 0.1) + SPOT_MARGIN - 1e-6
+    assert "A is taken by tb3_1's goal" in second.outcome
+    assert Instruction.objects.get(pk=first.pk).outcome == ""  # nothing to tell: A was free

@@ -1,0 +1,94 @@
+"""Fleet coordination on the simulated demo fleet, judged by what the simulated robots do (ground truth)."""
+
+import itertools
+import math
+
+import pytest
+
+from execution.instructions import submit
+from tests.execution.helpers import parse, step, transitions, wait_final
+
+pytestmark = [pytest.mark.slow]
+
+A = (2.0, 2.0)
+
+
+def displacements(sim, before: dict) -> dict[str, float]:
+    """How far each robot has moved from its pose in `before` (the simulator's ground truth)."""
+    return {name: math.dist(sim.pose(name)[:2], pose[:2]) for name, pose in before.items()}
+
+
+@pytest.mark.timeout(150)
+def test_move_to_a_and_clean_moves_only_the_nearest_free_capable_robot(
+    demo_world, seeded_ontology, fleet_admin
+):
+    """No robot named: husky goes (4.0 m round the crate to A); turtlebot is 4.7 m away in a straight line
+    already, tiago 5.4 m, robot1..4 over 6.5 m. The others stay where they are."""
+    sim = demo_world
+    before = {name: sim.pose(name) for name in sim.robots}
+    instruction = wait_final(submit("Move to A and clean", fleet_admin), timeout=140)
+    assert instruction.status == "succeeded", instruction.outcome
+    moved = {name: d for name, d in displacements(sim, before).items() if d > 0.3}
+    assert list(moved) == ["husky"], moved
+    assert math.dist(sim.pose("husky")[:2], A) < 1.0  # cleaned around A
+    assert instruction.outcome.startswith("husky: nearest free robot, 4.0 m (turtlebot 4.7+ m, tiago 5.4+ m")
+
+
+def contacts(sim) -> list:
+    """Robot-robot contacts the simulator's physics has counted so far."""
+    return sim.call(lambda: list(sim.fleet.physics.contacts))
+
+
+def circumscribed(sim, name) -> float:
+    return sim.fleet.robots[name].profile.circumscribed_radius
+
+
+@pytest.mark.timeout(200)
+def test_four_robots_sent_to_a_at_once_end_on_four_spots_without_contact(demo_world, fleet_admin):
+    """Four instructions, one per robot, submitted together: A is given once, the others get free spots
+    around it (told so), and nobody touches anybody on the way or at the end."""
+    sim = demo_world
+    names = ["robot1", "robot2", "robot3", "robot4"]
+    instructions = [
+        submit(f"move {name} to A", fleet_admin, parse=parse(step([name], *A, "A", speed="normal")))
+        for name in names
+    ]
+    done = [wait_final(instruction, timeout=180) for instruction in instructions]
+    assert [i.status for i in done] == ["succeeded"] * 4, [i.outcome for i in done]
+    assert contacts(sim) == []
+    final = {name: sim.pose(name)[:2] for name in names}
+    for a, b in itertools.combinations(names, 2):
+        assert math.dist(final[a], final[b]) > circumscribed(sim, a) + circumscribed(sim, b), (a, b)
+    assert sum("A is taken by" in i.outcome for i in done) == 3
+    assert min(math.dist(p, A) for p in final.values()) < 0.2  # the first one stands on A itself
+
+
+@pytest.mark.timeout(200)
+def test_two_pairs_swapping_places_across_each_others_paths_finish_without_contact(demo_world, fleet_admin):
+    """turtlebot and husky swap places east-west while tiago and robot4 swap north-south, all at once, their
+    straight lines crossing near the middle. Everyone arrives; no two bodies touch."""
+    sim = demo_world
+    start = {name: sim.pose(name)[:2] for name in ("turtlebot", "husky", "tiago", "robot4")}
+    swaps = {
+        "turtlebot": start["husky"],
+        "husky": start["turtlebot"],
+        "tiago": start["robot4"],
+        "robot4": start["tiago"],
+    }
+    goals = {}
+    for name, (x, y) in swaps.items():
+        goals[name] = submit(
+            f"move {name} to {name}'s swap", fleet_admin, parse=parse(step([name], x, y, "S"))
+        )
+    done = {name: wait_final(instruction, timeout=180) for name, instruction in goals.items()}
+    assert {name: i.status for name, i in done.items()} == dict.fromkeys(swaps, "succeeded"), {
+        name: i.outcome for name, i in done.items()
+    }
+    assert contacts(sim) == []
+    for name, instruction in done.items():
+        destination = instruction.executions.get().steps[0]["destination"]
+        off = math.dist(sim.pose(name)[:2], (destination["x"], destination["y"]))
+        said = transitions(name)[-1][2]  # the words of its last transition: what it did
+        # On arrival a place may be too tight for a big robot (tiago at robot4's start, robot3 parked beside
+        # it): it stops at the nearest free spot and says so.
+        assert off < 0.25 or ("its spot was taken" in said and off < 0.6), (name, off, said)

@@ -1,0 +1,97 @@
+"""The traffic table in Redis: reservations, claims, waits and deadlocks (no simulator; the robots are rows)."""
+
+import itertools
+import math
+
+import pytest
+from django.core.cache import cache
+
+import live
+from execution import traffic
+from fleetcore import traffic as plain
+from places.worlds import load_world_into_db
+from robots.models import Robot
+
+SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
+
+
+@pytest.fixture
+def robots(db, exec_settings):
+    """Three small robots on the paper map, standing apart (their poses in the pose store)."""
+    load_world_into_db("paper")
+    made = {}
+    for name, (x, y) in {"a": (-2.0, 0.0), "b": (0.0, -2.0), "c": (4.0, 4.0)}.items():
+        robot = Robot.objects.create(name=name, endpoint=f"ws://sim/{name}", footprint=SQUARE)
+        cache.set(live.POSE_CACHE_KEY.format(id=robot.pk), {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}, 60)
+        made[name] = robot
+    yield made
+    cache.delete_many([live.POSE_CACHE_KEY.format(id=r.pk) for r in made.values()])
+
+
+def test_a_claimed_stretch_is_refused_to_a_robot_crossing_it_until_released(robots):
+    a, b = robots["a"], robots["b"]
+    assert traffic.claim(a, (-2.0, 0.0), (2.0, 0.0)) is None
+    assert traffic.claim(b, (0.0, -2.0), (0.0, 2.0)) == a.pk  # across a's stretch: a is in the way
+    assert traffic.claim(b, (0.0, -2.0), (0.0, -1.0)) is None  # short of it: free
+    traffic.release(a, (2.0, 0.0, 0.0))  # a has arrived and parks at (2, 0)
+    assert traffic.claim(b, (0.0, -1.0), (0.0, 2.0)) is None
+    assert traffic.claim(b, (0.0, 2.0), (2.0, 0.3)) == a.pk  # onto where a parked
+    assert traffic.claim(b, (0.0, 2.0), (-1.0, 3.0)) is None  # and away from it
+
+
+def test_a_plan_goes_around_the_path_reserved_before_it(robots):
+    a, b = robots["a"], robots["b"]
+    first = traffic.plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
+    second = traffic.plan(b, (0.0, -2.0), (0.0, 2.0), 0.3)
+    assert second[-1][:2] == (0.0, 2.0) and first[-1][:2] == (2.0, 0.0)
+    table = plain.ReservationTable()
+    table.reserve_path("a", first, traffic.reach(a), lambda t: 0.0)
+    crossing = [
+        table.holder(cells, t0, t1, "b")
+        for p, q in itertools.pairwise(second)
+        for cells, t0, t1 in plain.leg_slots(p, q, traffic.reach(b), lambda t: 0.0)
+    ]
+    assert not any(crossing)  # b passes where a is not, when it passes
+    assert (
+        second[-1][2] - second[0][2] > 4.0 / 0.3 - 1e-6
+    )  # it waited or went round: not faster than straight
+
+
+def test_a_wait_for_cycle_is_broken_by_the_robot_with_the_highest_id(robots):
+    a, b = robots["a"], robots["b"]
+    redis = traffic.coordination.connection()
+    before = traffic.deadlocks()
+    traffic._put(redis, "waits", a.pk, {"for": b.pk, "expires": 1e12})
+    traffic._check_deadlock(redis, a.pk)  # a waits for b, b for nobody: a chain, no deadlock
+    traffic._put(redis, "waits", b.pk, {"for": a.pk, "expires": 1e12})
+    low, high = sorted((a, b), key=lambda r: r.pk)
+    traffic._check_deadlock(redis, low.pk)  # the lower id keeps waiting
+    with pytest.raises(traffic.Reroute) as caught:
+        traffic._check_deadlock(redis, high.pk)
+    assert caught.value.around == {low.pk}
+    assert traffic.deadlocks() == before + 1
+
+
+def test_the_map_is_told_the_route_and_whom_a_robot_waits_for(robots, monkeypatch):
+    sent = []
+    monkeypatch.setattr(live, "send_on_commit", lambda group, payload: sent.append((group, payload)))
+    live.path(robots["a"], [(1.0, 2.0), (3.0, 4.0)], None)
+    live.path(robots["a"], None, "b")
+    payloads = [payload for group, payload in sent if group == live.FLEET_GROUP]
+    assert payloads[0] == {
+        "type": "robot.path",
+        "id": robots["a"].pk,
+        "robot": "a",
+        "path": [[1.0, 2.0], [3.0, 4.0]],
+        "waiting_for": None,
+    }
+    assert payloads[1]["path"] is None and payloads[1]["waiting_for"] == "b"
+
+
+def test_stretches_are_short_and_keep_the_planned_waits():
+    path = [(0.0, 0.0, 0.0), (3.0, 0.0, 10.0), (3.0, 0.0, 12.0), (3.0, 1.0, 15.0)]
+    legs = traffic.stretches(path)
+    assert all(
+        math.dist(p[:2], q[:2]) <= traffic.LEG_M + 1e-9 for p, q in zip([path[0], *legs], legs, strict=False)
+    )
+    assert [leg[3] for leg in legs].count(True) == 1 and legs[-1][:2] == (3.0, 1.0)

@@ -1,0 +1,143 @@
+"""The plain traffic algorithms: free goal spots, the reservation table, space-time A*, wait-for cycles."""
+
+import itertools
+import math
+
+import pytest
+
+from fleetcore import traffic
+from fleetcore.traffic import Capsule, Disc, ReservationTable, SpaceTimeSearch, cell_of
+
+ROOM = (-3.0, 3.0)  # a 6 m x 6 m open room
+
+
+def open_room(cell):
+    x, y = traffic.center_of(cell)
+    return ROOM[0] + 0.3 < x < ROOM[1] - 0.3 and ROOM[0] + 0.3 < y < ROOM[1] - 0.3
+
+
+def conflicts(path, radius, table, robot, pad=0.0):
+    """The other robots whose reservations this timed path overlaps (in space and time)."""
+    found = set()
+    for a, b in itertools.pairwise(path):
+        for cells, t0, t1 in traffic.leg_slots(a, b, radius, lambda t: pad):
+            who = table.holder(cells, t0, t1, robot)
+            if who:
+                found.add(who)
+    return found
+
+
+def position(path, t):
+    """Where a timed path is at time t (before: its start; after: its end)."""
+    if t <= path[0][2]:
+        return path[0][:2]
+    for (x0, y0, t0), (x1, y1, t1) in itertools.pairwise(path):
+        if t0 <= t <= t1:
+            f = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
+            return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
+    return path[-1][:2]
+
+
+def closest_approach(a, b, step=0.05):
+    """The least distance between two robots following their timed paths."""
+    end = max(a[-1][2], b[-1][2])
+    return min(math.dist(position(a, i * step), position(b, i * step)) for i in range(int(end / step) + 2))
+
+
+def search(radius=0.15, speed=0.5, passable=open_room):
+    return SpaceTimeSearch(passable, radius, speed, pad=lambda t: 0.3)
+
+
+def test_a_free_goal_is_kept_and_a_taken_one_moves_to_the_nearest_free_spot():
+    anywhere = lambda x, y: True  # noqa: E731
+    assert traffic.free_spot((1.0, 1.0), 0.2, [], anywhere) == (1.0, 1.0)
+    parked = Disc(1.0, 1.0, 0.3, "robot1")
+    spot = traffic.free_spot((1.0, 1.0), 0.2, [parked], anywhere, prefer=(3.0, 1.0))
+    gap = math.dist(spot, (1.0, 1.0))
+    assert 0.2 + 0.3 + traffic.SPOT_MARGIN <= gap < 0.2 + 0.3 + traffic.SPOT_MARGIN + traffic.SPOT_STEP + 1e-9
+    assert spot[0] > 1.0 and traffic.compass((1.0, 1.0), spot) == "east"  # on the side it comes from
+
+
+def test_a_free_spot_stands_on_free_ground():
+    east_is_wall = lambda x, y: x < 1.2  # noqa: E731
+    spot = traffic.free_spot((1.0, 1.0), 0.2, [Disc(1.0, 1.0, 0.3)], east_is_wall, prefer=(3.0, 1.0))
+    assert spot[0] < 1.2 and traffic.clear_of(spot, 0.2, [Disc(1.0, 1.0, 0.3)]) is None
+    nowhere = lambda x, y: False  # noqa: E731
+    assert traffic.free_spot((1.0, 1.0), 0.2, [], nowhere) is None
+
+
+def test_a_lone_robot_drives_straight_to_its_goal():
+    path = search().plan((-2.0, 0.1), (2.0, 0.1), 100.0, ReservationTable(), "a")
+    assert [p[:2] for p in path] == [(-2.0, 0.1), (2.0, 0.1)]
+    assert path[-1][2] == pytest.approx(100.0 + 4.0 / 0.5, abs=0.5)
+
+
+def test_a_crossing_robot_waits_or_detours_around_a_reserved_path():
+    table = ReservationTable()
+    first = search().plan((-2.0, 0.1), (2.0, 0.1), 0.0, table, "a")
+    table.reserve_path("a", first, 0.15, lambda t: 0.3)
+    second = search().plan((0.1, -2.0), (0.1, 2.0), 0.0, table, "b")  # straight across a's line, same time
+    assert second is not None and second[-1][:2] == (0.1, 2.0)
+    assert conflicts(second, 0.15, table, "b", pad=0.3) == set()
+    straight_time = 4.0 / 0.5
+    assert second[-1][2] > straight_time  # it paid with a wait or a detour, not with a collision
+
+
+def test_two_pairs_swapping_places_find_plans_with_no_overlap():
+    """Prioritized planning: each robot plans against the paths reserved before it and the goals where those
+    robots will stand (from their arrival on); then no two plans meet, in space and time."""
+    table, plans, parked = ReservationTable(), {}, []
+    tasks = {
+        "a": ((-2.0, 0.1), (2.0, 0.1)),
+        "b": ((2.0, 0.1), (-2.0, 0.1)),
+        "c": ((0.1, -2.0), (0.1, 2.0)),
+        "d": ((0.1, 2.0), (0.1, -2.0)),
+    }
+    for robot, (start, _) in tasks.items():
+        table.reserve(robot, traffic.footprint_cells(start, 0.15), 0.0, 1.0)  # standing at its start now
+    for robot, (start, goal) in tasks.items():
+        table.release(robot)
+        plans[robot] = search().plan(start, goal, 0.0, table, robot, parked)
+        assert plans[robot] is not None, robot
+        table.reserve_path(robot, plans[robot], 0.15, lambda t: 0.3)
+        parked.append((Capsule(goal, goal, 0.15, robot), plans[robot][-1][2]))
+    for a, b in itertools.combinations(plans, 2):
+        assert closest_approach(plans[a], plans[b]) > 0.3, (a, b)  # two radii: their discs never overlap
+
+
+def test_a_robot_standing_is_gone_round_and_a_robot_parked_close_may_leave():
+    standing = [(Capsule((0.1, 0.1), (0.1, 0.1), 0.3, "parked"), -math.inf)]
+    path = search().plan((-2.0, 0.1), (2.0, 0.1), 0.0, ReservationTable(), "a", standing)
+    assert closest_approach(path, [(0.1, 0.1, 0.0)]) >= 0.3 + 0.15 - traffic.TRAFFIC_CELL / 2
+    squeezed = search().plan(
+        (0.1, 0.45), (0.1, 2.0), 0.0, ReservationTable(), "b", standing
+    )  # starts too close
+    assert squeezed is not None and squeezed[-1][:2] == (0.1, 2.0)
+
+
+def test_nobody_parks_where_another_robot_will_pass_later():
+    table = ReservationTable()
+    goal = (0.1, 0.1)
+    table.reserve("a", traffic.footprint_cells(goal, 0.15), 30.0, 35.0)  # a passes the goal at t = 30..35
+    path = search().plan((-2.0, 0.1), goal, 0.0, table, "b")
+    assert path is None or path[-1][2] >= 35.0  # b arrives after a has passed, or finds no plan
+    assert path is not None
+
+
+def test_an_unreachable_goal_has_no_plan():
+    walled = lambda c: open_room(c) and not (0.0 <= traffic.center_of(c)[0] <= 0.4)  # noqa: E731
+    assert search(passable=walled).plan((-2.0, 0.1), (2.0, 0.1), 0.0, ReservationTable(), "a") is None
+
+
+def test_wait_cycles_are_found_and_chains_are_not():
+    assert traffic.wait_cycle({"a": "b", "b": "a"}, "a") == ["a", "b"]
+    assert traffic.wait_cycle({"a": "b", "b": "c", "c": "a", "d": "a"}, "c") == ["c", "a", "b"]
+    assert (
+        traffic.wait_cycle({"a": "b", "b": "c"}, "a") is None
+    )  # c waits for nobody: a chain, not a deadlock
+    assert traffic.wait_cycle({"d": "a", "a": "b", "b": "a"}, "d") is None  # d waits on a cycle it is not in
+
+
+def test_cells_cover_the_footprint():
+    cells = traffic.footprint_cells((0.1, 0.1), 0.25)
+    assert cell_of((0.1, 0.1)) in cells and cell_of((0.33, 0.1)) in cells and cell_of((0.6, 0.1)) not in cells
