@@ -57,7 +57,7 @@ def stop(robots, user, source: str = "console") -> dict[str, str]:
     audit.record(user, "stop", ", ".join(r.name for r in robots)[:255], source=source, results=results)
     if robots and len({robot.pk for robot in robots}) == Robot.objects.count():
         who = getattr(user, "username", None) or "the system"
-        alerts.raise_alert("emergency_stop", None, f"every robot stopped by {who} ({source})")
+        alerts.raise_alert("emergency_stop", None, f"a stop of every robot, by {who} ({source})")
     return results
 
 
