@@ -367,7 +367,9 @@ def retry(now=None) -> list[int]:
     dispatched = []
     for pk in list(waiting().values_list("pk", flat=True)[:50]):
         with transaction.atomic():
-            instruction = waiting().select_for_update().filter(pk=pk).select_related("user").first()
+            instruction = (
+                waiting().select_for_update(of=("self",)).filter(pk=pk).select_related("user").first()
+            )
             if instruction is not None and _retry_one(instruction, now):
                 dispatched.append(pk)
     return dispatched
