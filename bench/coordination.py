@@ -41,6 +41,7 @@ MODES = {
 WORLD = "warehouse"
 SPEED = "very fast"
 GOAL_BAND = (11.0, 19.0)  # y range of the goals: the cross aisle and the north block's aisles
+GOAL_X = (3.0, 27.0)  # x range of the goals: clear of the robots parked along the west and east walls
 FLEET_ORDER = ("husky", "spot", "tb", "tiago")  # robots taken round-robin from these groups: mixed models
 
 
@@ -82,7 +83,7 @@ def crossing_goals(world, names: list[str], rng: random.Random) -> dict[str, tup
     for _ in range(5000):
         if len(goals) == len(names):
             break
-        p = (round(rng.uniform(1.0, 29.0), 2), round(rng.uniform(*GOAL_BAND), 2))
+        p = (round(rng.uniform(*GOAL_X), 2), round(rng.uniform(*GOAL_BAND), 2))
         if planner.free(*planner.to_cell(*p)) and all(math.dist(p, q) > 2 * biggest + 0.4 for q in goals):
             goals.append(p)
     west_first = sorted(names, key=lambda n: specs[n].x)

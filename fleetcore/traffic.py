@@ -268,9 +268,11 @@ class Clearance:
         """The least gap at the cell to the robots standing by time t (a wide gap when none is near)."""
         return min((gap for since, gap in self.gaps(c) if since <= t + self.pad(t)), default=TRAFFIC_CELL * 2)
 
-    def may_move(self, c: Cell, n: Cell, t: float) -> bool:
+    def may_move(self, c: Cell, n: Cell, t: float, loose: bool = False) -> bool:
+        """Whether a move from c to n keeps clear, or at least gets no nearer; loose (still within where the
+        robot stood): half a cell nearer is let pass, as cell centres misplace the robot's real start."""
         end = self.gap(n, t)
-        return end >= 0 or end >= self.gap(c, t) - 1e-9
+        return end >= 0 or end >= self.gap(c, t) - (TRAFFIC_CELL / 2 if loose else 1e-9)
 
     def stays(self, c: Cell, t: float) -> bool:
         """Whether the robot may stay at the cell from t on: no robot will come to stand too close later."""
@@ -358,7 +360,7 @@ class SpaceTimeSearch:
                     here -= mine
                 if here and table.holder(here, t - self.pad(t), t1 + self.pad(t1), robot) is not None:
                     continue
-                if not near.may_move(c, n, t1):
+                if not near.may_move(c, n, t1, loose=c in mine):
                     continue
                 nxt = (n, round((t1 - t0) / tick))
                 if nxt in parent:
