@@ -334,6 +334,7 @@ class SpaceTimeSearch:
             return [(c[0] + dc, c[1] + dr) for dc, dr in offsets]
 
         mine = set(cells(s))
+        squeezed = near.gap(s, t0) < 0  # it starts nearer to a robot standing than it should come
         counter = itertools.count()
         start_state = (s, 0)
         openq = [(distance[s] * tick, next(counter), start_state, t0)]
@@ -360,7 +361,7 @@ class SpaceTimeSearch:
                     here -= mine
                 if here and table.holder(here, t - self.pad(t), t1 + self.pad(t1), robot) is not None:
                     continue
-                if not near.may_move(c, n, t1, loose=c in mine):
+                if not near.may_move(c, n, t1, loose=squeezed and c in mine):
                     continue
                 nxt = (n, round((t1 - t0) / tick))
                 if nxt in parent:
