@@ -4,8 +4,8 @@
 {"coordination": {"<n>": {"contacts", "deadlocks", "completion", "makespan_s", "lone_s", "makespan_ratio"},
  "allocation_ms_1000": {"p50", "p99"}}, ...}.
 
-For n = 2, 4, 8, 16, 32 robots (quick: 2, 4, 8) of mixed models (Huskies, Spots, TurtleBots, TIAGos with
-move_base), each gets a goal on the far side of the warehouse (robots from the west go east and the other way
+For n = 2, 4, 8, 16, 32 robots (quick: 2, 4, 8) of mixed models (Huskies, TurtleBots, TIAGos with move_base;
+not the Spots, whose go_to_pose the simulator does not serve), each gets a goal on the far side of the warehouse (robots from the west go east and the other way
 round, so the routes cross), submitted together as one instruction per robot through
 execution.instructions.submit, run by the execution engine in this process (threads) against the simulator.
 
@@ -41,7 +41,10 @@ MODES = {
 WORLD = "warehouse"
 SPEED = "very fast"
 GOAL_BAND = (11.0, 19.0)  # y range of the goals: the cross aisle and the north block's aisles
-FLEET_ORDER = ("husky", "spot", "tb", "tiago")  # robots taken round-robin from these groups: mixed models
+GOAL_X = (3.0, 27.0)  # x range of the goals: clear of the robots parked along the west and east walls
+# Robots are taken round-robin from these groups, so any n mixes models. Spot is left out: its driver's
+# go_to_pose (bound as its navigation) is not simulated, so a Spot never arrives (issue 16 saw it too).
+FLEET_ORDER = ("husky", "tb", "tiago")
 
 
 def setup_django(db_path: str) -> None:
@@ -82,7 +85,7 @@ def crossing_goals(world, names: list[str], rng: random.Random) -> dict[str, tup
     for _ in range(5000):
         if len(goals) == len(names):
             break
-        p = (round(rng.uniform(1.0, 29.0), 2), round(rng.uniform(*GOAL_BAND), 2))
+        p = (round(rng.uniform(*GOAL_X), 2), round(rng.uniform(*GOAL_BAND), 2))
         if planner.free(*planner.to_cell(*p)) and all(math.dist(p, q) > 2 * biggest + 0.4 for q in goals):
             goals.append(p)
     west_first = sorted(names, key=lambda n: specs[n].x)

@@ -268,9 +268,11 @@ class Clearance:
         """The least gap at the cell to the robots standing by time t (a wide gap when none is near)."""
         return min((gap for since, gap in self.gaps(c) if since <= t + self.pad(t)), default=TRAFFIC_CELL * 2)
 
-    def may_move(self, c: Cell, n: Cell, t: float) -> bool:
+    def may_move(self, c: Cell, n: Cell, t: float, loose: bool = False) -> bool:
+        """Whether a move from c to n keeps clear, or at least gets no nearer; loose (still within where the
+        robot stood): half a cell nearer is let pass, as cell centres misplace the robot's real start."""
         end = self.gap(n, t)
-        return end >= 0 or end >= self.gap(c, t) - 1e-9
+        return end >= 0 or end >= self.gap(c, t) - (TRAFFIC_CELL / 2 if loose else 1e-9)
 
     def stays(self, c: Cell, t: float) -> bool:
         """Whether the robot may stay at the cell from t on: no robot will come to stand too close later."""
@@ -283,6 +285,7 @@ class Clearance:
         return first_in_the_way(a[:2], b[:2], self.radius, active) is None
 
 
+SHORTCUT_REACH = 40  # points ahead a straight leg may join (string pulling costs grow with the square)
 MOVES = [(dc, dr, math.hypot(dc, dr)) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if dc or dr]
 
 
@@ -318,7 +321,8 @@ class SpaceTimeSearch:
         and the robots standing, exactly, as discs (each from its time `since` on: a robot parked now has
         -inf, another's goal the time it arrives there), ending where the robot may stay; consecutive equal
         points are waits. The cells the robot stands on at the start are its own until it moves.
-        progress() is called every few thousand expansions (keep a lock alive, honour a stop). None: no plan."""
+        progress() is called every few hundred steps of work (keep a lock alive, honour a stop). None: no plan."""
+        self._progress = progress or (lambda: None)
         s, g = cell_of(start), cell_of(goal)
         distance = self._distances(g, s)
         if s not in distance:
@@ -332,6 +336,7 @@ class SpaceTimeSearch:
             return [(c[0] + dc, c[1] + dr) for dc, dr in offsets]
 
         mine = set(cells(s))
+        squeezed = near.gap(s, t0) < 0  # it starts nearer to a robot standing than it should come
         counter = itertools.count()
         start_state = (s, 0)
         openq = [(distance[s] * tick, next(counter), start_state, t0)]
@@ -340,8 +345,8 @@ class SpaceTimeSearch:
         for expansions in range(self.max_expansions):
             if not openq:
                 break
-            if progress is not None and expansions % 2000 == 1999:
-                progress()
+            if expansions % 500 == 499:
+                self._progress()
             _, _, state, t = heapq.heappop(openq)
             c = state[0]
             if c == g and table.free_after(cells(c), t - self.pad(t), robot) and near.stays(c, t):
@@ -358,7 +363,7 @@ class SpaceTimeSearch:
                     here -= mine
                 if here and table.holder(here, t - self.pad(t), t1 + self.pad(t1), robot) is not None:
                     continue
-                if not near.may_move(c, n, t1):
+                if not near.may_move(c, n, t1, loose=squeezed and c in mine):
                     continue
                 nxt = (n, round((t1 - t0) / tick))
                 if nxt in parent:
@@ -373,7 +378,11 @@ class SpaceTimeSearch:
             return {}
         dist = {goal: 0.0}
         heap = [(0.0, goal)]
-        while heap:
+        for pops in itertools.count():
+            if not heap:
+                break
+            if pops % 5000 == 4999:
+                self._progress()
             d, c = heapq.heappop(heap)
             if d > dist.get(c, math.inf):
                 continue
@@ -403,7 +412,8 @@ class SpaceTimeSearch:
         out, i = [points[0]], 0
         while i < len(points) - 1:
             j = i + 1
-            for k in range(len(points) - 1, i + 1, -1):
+            for k in range(min(len(points) - 1, i + SHORTCUT_REACH), i + 1, -1):
+                self._progress()
                 if self._straight_ok(points[i : k + 1], table, robot):
                     j = k
                     break

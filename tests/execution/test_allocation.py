@@ -156,3 +156,25 @@ def test_two_instructions_to_one_place_never_share_the_spot(fleet, fleet_admin, 
     assert math.dist((a["x"], a["y"]), (b["x"], b["y"])) >= 2 * math.hypot(0.1, 0.1) + SPOT_MARGIN - 1e-6
     assert "A is taken by tb3_1's goal" in second.outcome
     assert Instruction.objects.get(pk=first.pk).outcome == ""  # nothing to tell: A was free
+
+
+def test_the_api_takes_the_robots_selected_on_the_page(
+    fleet, fleet_admin, client_for, no_runner, monkeypatch
+):
+    from execution import instructions
+
+    monkeypatch.setattr(instructions, "_interpret", lambda text: parse(to(*D, "D")))
+    fleet("near", 1.0, 4.6)
+    far = fleet("far", -4.0, 4.0)
+    client = client_for(fleet_admin)
+    response = client.post(
+        "/api/instructions", {"text": "go to D", "robot_ids": [far.pk]}, content_type="application/json"
+    )
+    assert response.status_code == 201, response.content
+    assert list(Instruction.objects.get(pk=response.json()["id"]).robots.values_list("name", flat=True)) == [
+        "far"
+    ]
+    bad = client.post(
+        "/api/instructions", {"text": "go to D", "robot_ids": "far"}, content_type="application/json"
+    )
+    assert bad.status_code == 422 and "robot_ids" in bad.content.decode()

@@ -52,4 +52,4 @@ def test_the_simulator_serves_every_warehouse_robot():
         assert set(sim.urls) == {"husky", "spot", "tb3", "tiago"}
         assert len(sim.fleet.robots) >= 32
         x, y, _ = sim.pose("tb20")
-        assert (x, y) == pytest.approx((16.2, 3.2), abs=0.01)
+        assert (x, y) == pytest.approx((20.5, 1.0), abs=0.01)
