@@ -51,6 +51,7 @@ BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set
 BUSY = ("running", "queued")
 MAX_REROUTES = 4
 MUTEX_TTL_MS = 3000
+WAIT_POLL_S = 0.1  # s between a waiting robot's tries
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 PLANNED_SPEED = 0.7  # of the commanded speed: turns on the spot and ramps make robots slower than their top
@@ -69,13 +70,19 @@ def _key(name: str) -> str:
 
 
 @contextlib.contextmanager
-def mutex(limit_s: float = 5.0):
-    """One planner or claimer at a time across every worker (check-then-write must not interleave)."""
+def mutex(progress=None, limit_s: float = 10.0):
+    """One planner or claimer at a time across every worker (check-then-write must not interleave).
+
+    progress() is called while waiting (the waiting robot keeps its own lock and hears a stop)."""
     redis, token = coordination.connection(), coordination.new_token()
     deadline = time.monotonic() + limit_s
-    while not redis.set(_key("mutex"), token, nx=True, px=MUTEX_TTL_MS):
+    for tries in itertools.count():
+        if redis.set(_key("mutex"), token, nx=True, px=MUTEX_TTL_MS):
+            break
         if time.monotonic() > deadline:
             raise StepFailed("the traffic table is busy (its lock was not released); try again")
+        if progress is not None and tries % 20 == 19:
+            progress()
         time.sleep(0.005)
     try:
         yield redis
@@ -184,8 +191,7 @@ def plan(
     now = time.time()
     path = None
     if planner is not None:
-        with mutex() as redis:
-            table, still = obstacles(redis, robot.pk, now, around)
+        table, still = obstacles(coordination.connection(), robot.pk, now, around)  # a snapshot: no lock
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
         still = [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
         goal = free_goal(robot, goal, radius, still, planner, start)
@@ -195,7 +201,7 @@ def plan(
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
         path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
-    with mutex() as redis:
+    with mutex(progress) as redis:
         _reserve(redis, robot, path, radius, now)
     return path
 
@@ -248,13 +254,14 @@ def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float) 
     _put(redis, "plans", robot.pk, entry)
 
 
-def claim(robot: Robot, start, end) -> int | None:
+def claim(robot: Robot, start, end, progress=None) -> int | None:
     """Claim the stretch from start to end for the robot (replacing its previous claim); the id of a robot in
     the way (holding room there, or standing there), or None when the claim is the robot's."""
     radius = reach(robot)
-    with mutex() as redis:
+    everyone = standing(coordination.connection(), {robot.pk})  # the slow part (database), before the lock
+    with mutex(progress) as redis:
         claims = {pk: _capsule(pk, e) for pk, e in _hash(redis, "claims").items() if pk != robot.pk}
-        others = [*claims.values(), *(disc for disc, _ in standing(redis, {robot.pk, *claims}))]
+        others = [*claims.values(), *(disc for disc, _ in everyone if int(disc.label) not in claims)]
         blocker = plain.first_in_the_way(
             tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK
         )
@@ -290,7 +297,7 @@ def wait_for(session: Session, start, end) -> None:
     go around a robot that is not under way; StepFailed after WAIT_LIMIT_S."""
     robot, redis = session.robot, coordination.connection()
     started, same_since, last, name = time.monotonic(), time.monotonic(), None, ""
-    while (blocker := claim(robot, start, end)) is not None:
+    while (blocker := claim(robot, start, end, session.check)) is not None:
         now = time.monotonic()
         if blocker != last:
             same_since, last = now, blocker
@@ -307,7 +314,8 @@ def wait_for(session: Session, start, end) -> None:
         if now - started > WAIT_LIMIT_S:
             raise StepFailed(f"{robot.name}: waited {WAIT_LIMIT_S:.0f} s for {name} to make way")
         session.check()
-        session.pose()  # paced by odometry; a robot waiting still reports where it is
+        time.sleep(WAIT_POLL_S)
+        session.pose()  # a robot waiting still reads where it is (and odometry that stops fails the step)
     if last is not None:
         live.path(robot, None, None)
 
@@ -359,7 +367,7 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     speed = limits.linear * factor * PLANNED_SPEED
     around: set[int] = set()
     here = session.pose()[:2]
-    claim(robot, here, here)  # under traffic from now on: others wait for it, never go round it as parked
+    claim(robot, here, here, session.check)  # under traffic from now on: others wait for it, not go round it
     try:
         for _ in range(MAX_REROUTES + 1):
             pose = session.pose()
@@ -370,7 +378,7 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
             except Reroute as exc:
                 around |= exc.around
                 here = session.pose()[:2]
-                claim(robot, here, here)  # keep only where it stands: the others may go on
+                claim(robot, here, here, session.check)  # keep only where it stands: the others may go on
         raise StepFailed(f"{robot.name}: no way through after {MAX_REROUTES} reroutes")
     finally:
         release(robot, session.link.poses.value)
