@@ -32,16 +32,8 @@ ALLOWED_HOSTS = env_list("ALLOWED_HOSTS", ["127.0.0.1", "localhost", "[::1]", "t
 REDIS_URL = env_redis_url("REDIS_URL", VAR_DIR / "redis.sock")
 EMBEDDED_REDIS = "REDIS_URL" not in os.environ or not os.environ["REDIS_URL"]
 
-INSTALLED_APPS = [
-    "django.contrib.admin",
-    "django.contrib.auth",
-    "django.contrib.contenttypes",
-    "django.contrib.sessions",
-    "django.contrib.messages",
-    "django.contrib.staticfiles",
-    "channels",
-    # Project and domain apps, from the top layer down (docs/ARCHITECTURE.md; `make lint` checks the order).
-    "axes",
+# Project and domain apps, from the top layer down (docs/ARCHITECTURE.md; `make lint` checks the order).
+FLEET_APPS = [
     "fleet",
     "portal",
     "experiments",
@@ -53,6 +45,18 @@ INSTALLED_APPS = [
     "alerts",
     "audit",
     "simworker",
+]
+
+INSTALLED_APPS = [
+    "django.contrib.admin",
+    "django.contrib.auth",
+    "django.contrib.contenttypes",
+    "django.contrib.sessions",
+    "django.contrib.messages",
+    "django.contrib.staticfiles",
+    "channels",
+    "axes",
+    *FLEET_APPS,
 ]
 
 MIDDLEWARE = [
@@ -194,20 +198,7 @@ LOGGING = {
     "formatters": {"short": {"format": "%(asctime)s %(levelname)s %(name)s: %(message)s"}},
     "handlers": {"console": {"class": "logging.StreamHandler", "formatter": "short"}},
     "root": {"handlers": ["console"], "level": "WARNING"},
-    "loggers": {
-        name: {"level": "INFO"}
-        for name in (
-            "fleet",
-            "portal",
-            "experiments",
-            "execution",
-            "interpreter",
-            "access",
-            "places",
-            "robots",
-            "simworker",
-        )
-    },
+    "loggers": {name: {"level": "INFO"} for name in FLEET_APPS},
 }
 
 # The fleet's own knobs.
