@@ -202,14 +202,22 @@ def _with_extra(answer) -> tuple[str, dict]:
     return answer if isinstance(answer, tuple) else (answer, {})
 
 
+async def _accept_user(consumer) -> object | None:
+    """Accept the socket and return its logged-in user; close it with 4401 (not logged in) and return None."""
+    await consumer.accept()
+    user = consumer.scope.get("user")
+    if user is None or not user.is_authenticated:
+        await consumer.close(code=4401)
+        return None
+    return user
+
+
 class _PageConsumer(AsyncJsonWebsocketConsumer):
     """Authenticate, join the page's groups, send the snapshot first, then forward every delta."""
 
     async def connect(self):
-        await self.accept()
-        user = self.scope.get("user")
-        if user is None or not user.is_authenticated:
-            await self.close(code=4401)
+        user = await _accept_user(self)
+        if user is None:
             return
         self.abilities = await database_sync_to_async(self.granted)(user)
         if not self.abilities["view"]:
@@ -372,10 +380,8 @@ class AlertsConsumer(AsyncJsonWebsocketConsumer):
     """/ws/alerts/ on every page: the open alerts first, then each raise, acknowledgement and resolution."""
 
     async def connect(self):
-        await self.accept()
-        user = self.scope.get("user")
-        if user is None or not user.is_authenticated:
-            await self.close(code=4401)
+        user = await _accept_user(self)
+        if user is None:
             return
         if not await database_sync_to_async(may)(user, "view_alerts"):
             await self.close(code=4403)
