@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 BENCH ?= full
 
-.PHONY: run test bench lint format clean
+.PHONY: run test bench lint format clean cluster-up cluster-down
 
 $(STAMP): pyproject.toml requirements.lock
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -31,6 +31,16 @@ test: $(STAMP) $(JS_PROBE)
 ## bench: the paper's experiments and the scale benchmarks; results under bench/results/ (BENCH=quick: under 5 min)
 bench: $(STAMP)
 	$(PY) -m bench.run --$(BENCH)
+
+## cluster-up: a multi-host fleet on this machine (root): network namespaces db, web1, web2, exec1, exec2, sim1, sim2,
+## links on a private bridge (deploy/cluster.py; ROBOTS=N per simulator shard); web on http://10.77.0.11:8000/
+ROBOTS ?= 10
+cluster-up: $(STAMP)
+	$(PY) -m deploy.cluster up --robots-per-shard $(ROBOTS)
+
+## cluster-down: remove every process, namespace, veth and the bridge cluster-up made (idempotent)
+cluster-down:
+	$(PY) -m deploy.cluster down
 
 ## lint: style (ruff) and the layers of docs/ARCHITECTURE.md (import-linter; tests/test_architecture.py runs it too)
 lint: $(STAMP)

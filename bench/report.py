@@ -172,6 +172,9 @@ def write_all(results: dict[str, dict], out_dir: Path, mode: str, meta: dict | N
     return render_all(out_dir)
 
 
+CLUSTER_REPORT = Path("cluster") / "REPORT.md"
+
+
 def render_all(out_dir: Path) -> dict:
     """summary.json, the plots and REPORT.md from the run's JSON files in out_dir; return the summary.
 
@@ -182,7 +185,11 @@ def render_all(out_dir: Path) -> dict:
     summary = build_summary(results)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=1) + "\n")
     plots = write_plots(results, out_dir)
-    (out_dir / "REPORT.md").write_text(render_markdown(results, summary, run["mode"], plots, run["meta"]))
+    text = render_markdown(results, summary, run["mode"], plots, run["meta"])
+    cluster = out_dir / CLUSTER_REPORT  # the multi-host run's own report (bench.cluster), when one was made
+    if cluster.exists():
+        text += "\n" + cluster.read_text().replace("](", "](cluster/")
+    (out_dir / "REPORT.md").write_text(text)
     return summary
 
 

@@ -24,6 +24,7 @@ from execution.link import LinkError, publish_zero
 from execution.models import Execution
 from execution.runner import settle
 from fleetcore import motion
+from robots.commands import CommandSurface, surfaces
 from robots.models import Robot
 
 log = logging.getLogger(__name__)
@@ -95,15 +96,22 @@ class TeleopGrant:
     (pushed to every page) and re-checks all its grants at once every GRANT_S while they are used.
     """
 
-    robot_id: int
-    robot_name: str
-    endpoint: str
-    target: str
-    message_type: str
-    ros_version: int
+    surface: CommandSurface
     max_linear: float
     max_angular: float
     expires: float
+
+    @property
+    def robot_id(self) -> int:
+        return self.surface.robot_id
+
+    @property
+    def robot_name(self) -> str:
+        return self.surface.name
+
+    @property
+    def endpoint(self) -> str:
+        return self.surface.endpoint
 
     @property
     def valid(self) -> bool:
@@ -112,8 +120,9 @@ class TeleopGrant:
     def clamp(self, linear: float, angular: float) -> tuple[float, float]:
         return motion.clamp(float(linear), self.max_linear), motion.clamp(float(angular), self.max_angular)
 
-    def message(self, v: float, w: float) -> dict:
-        return motion.velocity_message(v, w, self.message_type, self.ros_version)
+    def publish(self, v: float, w: float):
+        """The (topic, message, type) that sends this velocity to the robot."""
+        return self.surface.velocity(v, w, 0.0)
 
 
 GRANT_S = 1.0
@@ -126,10 +135,8 @@ def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
     Refusals: ControlRefused (role, someone else's lease, a running instruction), LinkError (no move topic),
     ValueError (no such robot).
     """
-    from robots.models import Binding
-
     ids = list(dict.fromkeys(robot_ids))
-    robots = {robot.pk: robot for robot in Robot.objects.filter(pk__in=ids)}
+    robots = {robot.pk: robot for robot in Robot.objects.filter(pk__in=ids).prefetch_related("bindings")}
     found = list(robots)
     held = {lease.robot_id: lease.user for lease in leases.active(found)}
     busy = dict(
@@ -137,9 +144,7 @@ def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
             "robot_id", "instruction_id"
         )
     )
-    moves = {}
-    for binding in Binding.objects.filter(robot__in=found, action="move").exclude(target="").order_by("-pk"):
-        moves[binding.robot_id] = binding
+    commands = surfaces(robots.values())
     expires = time.monotonic() + GRANT_S
     out: dict[int, TeleopGrant | Exception] = {}
     for pk in ids:
@@ -154,13 +159,10 @@ def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
             continue
         if pk in busy:
             out[pk] = ControlRefused(f"{robot.name} is running instruction #{busy[pk]}; stop it first.")
-        elif (move := moves.get(pk)) is None:
+        elif not commands[pk].can_move:
             out[pk] = LinkError(f"{robot.name}: no move topic is bound")
         else:
-            out[pk] = TeleopGrant(
-                robot.pk, robot.name, robot.endpoint, move.target, move.message_type or "geometry_msgs/Twist",
-                robot.ros_version, robot.max_linear, robot.max_angular, expires,
-            )  # fmt: skip
+            out[pk] = TeleopGrant(commands[pk], robot.max_linear, robot.max_angular, expires)
     return out
 
 
@@ -182,7 +184,7 @@ def teleop_with(grant: TeleopGrant, user, linear: float, angular: float) -> tupl
         client = get_client(grant.endpoint)
     except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the person
         raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
-    client.publish(grant.target, grant.message(v, w), grant.message_type)
+    client.publish(*grant.publish(v, w))
     _audit_teleop(user, grant, v, w)
     return v, w
 
@@ -197,7 +199,7 @@ async def publish_teleop(grant: TeleopGrant, linear: float, angular: float) -> t
     v, w = grant.clamp(linear, angular)
     try:
         client = await pool.client(grant.endpoint)
-        await client.publish(grant.target, grant.message(v, w), grant.message_type)
+        await client.publish(*grant.publish(v, w))
     except Exception as exc:  # the link is down or went down: a one-line reason for the person
         raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
     return v, w

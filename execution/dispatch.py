@@ -30,7 +30,8 @@ from execution.models import Execution, Instruction, TimeSlot
 from fleetcore import states as statemachine
 from fleetcore import steps as step_contract
 from fleetcore.states import Admission, Event
-from fleetcore.steps import ANY, Step
+from fleetcore.steps import ANY, Step, Subject
+from interpreter.lexicon import kind_words
 from robots import poses as pose_store
 from robots.models import Robot
 
@@ -84,13 +85,17 @@ def resolve_robots(
     """The robots a step names, each online and (for people) outside its scheduled slots; and, for a step
     that names none, why the one chosen was chosen."""
     names = step.get("robots")
-    if names in (None, "", ANY):
+    subject = names if isinstance(names, dict) else None
+    if names in (None, "", ANY) or (subject and subject.get(ANY)):
         robot, why = allocate(Step.from_dict(step), user, moment, check_schedule)
         return [robot], why
-    if names == "all":
+    if names == "all" or subject:
         robots = free_robots(moment) if check_schedule else list(Robot.objects.filter(link_status="online"))
+        robots = [robot for robot in robots if matches(robot, subject)]
         if not robots:
-            raise Refused("No robot is free now (all are offline or busy with their schedules).")
+            raise Refused(
+                f"No robot{_of(subject)} is free now (all are offline or busy with their schedules)."
+            )
         return robots, ""
     if not names:
         raise Refused("Say which robot should do it (a name, or 'all robots').")
@@ -110,6 +115,26 @@ def resolve_robots(
     return robots, ""
 
 
+def matches(robot: Robot, subject: dict | None) -> bool:
+    """Whether the robot is one of a subject chosen by kind ({"model": "turtlebot", "except": ["husky"]})."""
+    if not subject:
+        return True
+    if robot.name in subject.get("except", ()):
+        return False
+    model = subject.get("model")
+    return not model or model.casefold() in kind_words(robot.model, robot.drive)
+
+
+def _of(subject: dict | None) -> str:
+    """ " (turtlebot, not husky)": the subject's filter in words, for an answer."""
+    if not subject:
+        return ""
+    words = ([subject["model"]] if subject.get("model") else []) + [
+        f"not {name}" for name in subject.get("except", ())
+    ]
+    return f" ({', '.join(words)})" if words else ""
+
+
 def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) -> tuple[Robot, str]:
     """The one best robot for a step that names none, and why it, in words for a person.
 
@@ -119,7 +144,12 @@ def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) ->
     planner route.py drives with); ties by battery when known, then the name. NoneFree (the instruction may
     wait) when capable robots exist but none is free; Refused when no robot could ever do it.
     """
-    candidates = list(Robot.objects.filter(link_status=Robot.Link.ONLINE).prefetch_related("bindings"))
+    subject = step.robots.to_dict() if isinstance(step.robots, Subject) else None
+    candidates = [
+        robot
+        for robot in Robot.objects.filter(link_status=Robot.Link.ONLINE).prefetch_related("bindings")
+        if matches(robot, subject)
+    ]
     busy = set(
         Execution.objects.filter(robot__in=candidates)
         .exclude(status__in=FINAL)
@@ -138,8 +168,8 @@ def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) ->
     if not free:
         detail = _listed(not_now + incapable) or "no robot is online"
         if not_now:
-            raise NoneFree(f"No robot is free to {step.action} now ({detail}).")
-        raise Refused(f"No robot can {step.action} ({detail}).")
+            raise NoneFree(f"No robot{_of(subject)} is free to {step.action} now ({detail}).")
+        raise Refused(f"No robot{_of(subject)} can {step.action} ({detail}).")
     robot, why, unreachable = best_of(free, step.destination)
     return robot, f"{robot.name}: {why}" + (
         f"; {_listed(unreachable + not_now + incapable)}" if unreachable or not_now or incapable else ""
@@ -268,7 +298,7 @@ def plan(
     chosen: list[str] | None = _selected_names(selected)
     for checked in steps:
         step = checked.to_dict()
-        if step.get("robots") in (None, "", ANY) and chosen:
+        if _unnamed(step.get("robots")) and chosen:
             step["robots"] = chosen
         robots, why = resolve_robots(step, moment, check_schedule, user)
         if why:
@@ -293,6 +323,11 @@ def plan(
             except ControlRefused as exc:
                 raise Refused(str(exc)) from None
     return Plan({robots_by_id[pk]: steps for pk, steps in per_robot.items()}, notes)
+
+
+def _unnamed(robots) -> bool:
+    """The step leaves the robot to the portal: "any", or any one of a kind (then the first choice holds)."""
+    return robots in (None, "", ANY) or (isinstance(robots, dict) and bool(robots.get(ANY)))
 
 
 def _selected_names(selected: list[int] | None) -> list[str] | None:
@@ -336,7 +371,8 @@ def dispatch(instruction: Instruction, plan: Plan) -> list[Execution]:
         now,
         outcome,
     )
-    transaction.on_commit(lambda: _after_commit(instruction.pk, preempts))
+    robot_ids = [robot.pk for robot in per_robot]
+    transaction.on_commit(lambda: _after_commit(robot_ids, preempts))
     return executions
 
 
@@ -402,10 +438,12 @@ def _retry_one(instruction: Instruction, now) -> bool:
     return False
 
 
-def _after_commit(instruction_id: int, preempts: list[tuple[int, int]]) -> None:
+def _after_commit(robot_ids: list[int], preempts: list[tuple[int, int]]) -> None:
+    """Wake each robot's executor: one task per robot, which runs the robot's queue under its lock."""
     for robot_id, execution_id in preempts:
         coordination.request_preempt(robot_id, execution_id)
-    launch("execute_instruction", instruction_id)
+    for robot_id in robot_ids:
+        launch("drain_robot", robot_id)
 
 
 def launch(task: str, pk: int) -> None:

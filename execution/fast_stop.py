@@ -1,7 +1,7 @@
 """A stop from a page's WebSocket leaves before any database work: stop flags, then zero velocities, from the loop.
 
-The web process keeps what a stop needs per robot in memory (endpoint, move topic and type, ROS version, the
-move_base cancel topic), loaded in one query and reloaded in the background when older than RELOAD_S. A stop
+The web process keeps each robot's command surface in memory (robots/commands.py: endpoint, move topic and
+type, ROS version, the move_base cancel topic), loaded in one query and reloaded in the background when older than RELOAD_S. A stop
 raises the robots' Redis stop flags (a running instruction sees them on its next tick and publishes nothing
 more), then publishes a zero velocity, and cancels a move_base goal, to every robot at once on this loop's own
 rosbridge links (robots.rosbridge.pool).
@@ -17,58 +17,30 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from dataclasses import dataclass
 
 from asgiref.sync import SyncToAsync, async_to_sync
 from channels.db import database_sync_to_async
+
+from robots.commands import CommandSurface, surfaces
 
 log = logging.getLogger(__name__)
 
 RELOAD_S = 10.0
 
 
-@dataclass(frozen=True)
-class StopTarget:
-    robot_id: int
-    name: str
-    endpoint: str
-    target: str
-    message_type: str
-    ros_version: int
-    cancel: str | None  # the move_base cancel topic, for robots whose goals go to move_base
-
-
-def load_targets() -> dict[int, StopTarget]:
-    """Every robot's stop target (one query for robots and bindings); robots without a move topic are left out."""
-    from execution.link import NAV_MOVE_BASE, action_namespace, bindings_of, navigation_kind
+def load_targets() -> dict[int, CommandSurface]:
+    """Every robot's command surface (one query for robots and bindings); robots without a move topic are left out."""
     from robots.models import Robot
 
-    targets = {}
-    for robot in Robot.objects.prefetch_related("bindings"):
-        bindings = bindings_of(robot)
-        move, navigate = bindings.get("move"), bindings.get("navigate")
-        if move is None:
-            continue
-        cancel = None
-        if navigation_kind(navigate) == NAV_MOVE_BASE:
-            cancel = f"{action_namespace(navigate.target)}/cancel"
-        targets[robot.pk] = StopTarget(
-            robot.pk,
-            robot.name,
-            robot.endpoint,
-            move.target,
-            move.message_type or "geometry_msgs/Twist",
-            robot.ros_version,
-            cancel,
-        )
-    return targets
+    found = surfaces(Robot.objects.prefetch_related("bindings"))
+    return {pk: surface for pk, surface in found.items() if surface.can_move}
 
 
 class Targets:
     """The process's stop targets, reloaded in the background when stale (never on a stop's way)."""
 
     def __init__(self) -> None:
-        self.by_robot: dict[int, StopTarget] = {}
+        self.by_robot: dict[int, CommandSurface] = {}
         self.loaded_at = float("-inf")
         self.loading: asyncio.Task | None = None
 
@@ -109,7 +81,7 @@ class Targets:
         self.by_robot = load_targets()
         self.loaded_at = time.monotonic()
 
-    def of(self, robot_ids) -> list[StopTarget]:
+    def of(self, robot_ids) -> list[CommandSurface]:
         if robot_ids == "all":
             return list(self.by_robot.values())
         return [self.by_robot[pk] for pk in robot_ids if pk in self.by_robot]
@@ -126,7 +98,6 @@ TARGETS = Targets()
 async def stop_now(robot_ids) -> int:
     """Flags, then a zero velocity to each known robot whose link is up; how many zeros went out."""
     from execution import coordination
-    from fleetcore import motion
     from robots.rosbridge import pool
 
     targets = TARGETS.of(robot_ids)
@@ -135,14 +106,11 @@ async def stop_now(robot_ids) -> int:
         return 0
     await coordination.arequest_stop([target.robot_id for target in targets])
 
-    async def zero(target: StopTarget) -> bool:
+    async def zero(target: CommandSurface) -> bool:
         try:
             link = await pool.client(target.endpoint, connect_timeout=0.0)  # up now, or skipped
-            now = time.time()
-            message = motion.velocity_message(0.0, 0.0, target.message_type, target.ros_version, now)
-            await link.publish(target.target, message, target.message_type)
-            if target.cancel:
-                await link.publish(target.cancel, motion.goal_id("", now), "actionlib_msgs/GoalID")
+            for topic, message, type_ in target.zero():
+                await link.publish(topic, message, type_)
         except Exception as exc:  # not up yet, or down: control.stop tries it next and says why
             log.info("fast stop of robot %s skipped: %s", target.robot_id, exc)
             return False

@@ -38,7 +38,24 @@ STUCK = "robot_stuck"  # the alert kind a stall raises
 def go_to(session: Session, step: Step) -> str:
     """Move (or navigate) to the step's destination, then do its task there if it has one."""
     note = _travel(session, step.destination, step.factor) if step.destination is not None else ""
+    if step.destination is not None and step.destination.yaw is not None:
+        note += _face(session, step.destination.yaw, step.factor)
     return task(session, step) if step.task else f"arrived at {_where(step)}{note}"
+
+
+def _face(session: Session, yaw: float, factor: float) -> str:
+    """Turn on the spot to the heading the goal was given with."""
+    limits = session.link.limits()
+    try:
+        drive(
+            session,
+            motion.Face(yaw, limits, factor),
+            travel_time(0.0, math.pi, limits, factor),
+            stall_s=STALL_S,
+        )
+    except Stalled as exc:
+        raise StepFailed(_stuck(session, "turning to its heading", str(exc))) from exc
+    return f", facing {math.degrees(yaw):.0f}°"
 
 
 def task(session: Session, step: Step) -> str:
@@ -79,6 +96,78 @@ def dock(session: Session, step: Step) -> str:
     x0, y0, _ = robot.start_pose or (0.0, 0.0, 0.0)
     _travel(session, Destination("home", x0, y0), step.factor)
     return "back at its start pose (no docking action bound)"
+
+
+def move_by(session: Session, step: Step) -> str:
+    """Drive straight ahead (or back) by the step's amount in metres, holding the heading it starts with."""
+    distance = float(step.amount or 0.0)
+    doing = f"{abs(distance):g} m {'forward' if distance >= 0 else 'back'}"
+    limits = session.link.limits()
+    controller = motion.Straight(distance, limits, step.factor)
+    _drive_by(session, f"moving {doing}", controller, travel_time(abs(distance), 0.0, limits, step.factor))
+    return f"moved {doing}"
+
+
+def turn_by(session: Session, step: Step) -> str:
+    """Turn on the spot by the step's amount in degrees (left, anticlockwise, when positive)."""
+    degrees = float(step.amount or 0.0)
+    doing = f"{abs(degrees):g}° {'left' if degrees >= 0 else 'right'}"
+    limits = session.link.limits()
+    controller = motion.TurnBy(math.radians(degrees), limits, step.factor)
+    _drive_by(
+        session,
+        f"turning {doing}",
+        controller,
+        travel_time(0.0, abs(math.radians(degrees)), limits, step.factor),
+    )
+    return f"turned {doing}"
+
+
+def _drive_by(session: Session, doing: str, controller, limit: float) -> None:
+    """A relative motion: the robot's state says what it does, and a stall fails the step in those words."""
+    Robot.objects.transition(session.robot.pk, Event.MOVE, doing, session.execution.instruction_id)
+    try:
+        drive(session, controller, limit, stall_s=STALL_S)
+    except Stalled as exc:
+        raise StepFailed(_stuck(session, doing, str(exc))) from exc
+
+
+def wait(session: Session, step: Step) -> str:
+    """Stay where it is for the step's amount in seconds, standing still, while stops and preemptions work."""
+    seconds = float(step.amount or 0.0)
+    session.link.halt()
+    until = time.monotonic() + seconds
+    while time.monotonic() < until:
+        session.pose()  # keeps the heartbeat and sees a dropped link
+        session.check()
+    return f"waited {seconds:g} s"
+
+
+MIN_ROUND_S = 1.0  # a round of a repeat takes at least this long (a loop of steps with nothing left to do)
+
+
+def repeat(session: Session, step: Step) -> str:
+    """Run the `span` steps before this one again, `amount` more times or, without an amount, until stopped.
+
+    The execution's step index stays on this step while it loops, so a preempted loop goes on when resumed.
+    """
+    from execution.models import Execution
+    from execution.steps import run_step
+
+    index = Execution.objects.filter(pk=session.execution.pk).values_list("step_index", flat=True).get()
+    body = session.execution.steps[max(0, index - (step.span or 1)) : index]
+    if not body:
+        raise StepFailed(f"{session.robot.name}: there is nothing before the repeat to do again")
+    rounds = 0
+    while step.amount is None or rounds < step.amount:
+        started = time.monotonic()
+        for item in body:
+            run_step(session, item)
+        rounds += 1
+        while time.monotonic() - started < MIN_ROUND_S:
+            session.pose()
+            session.check()
+    return f"repeated {len(body)} step(s) {rounds} more time(s)"
 
 
 def report_position(session: Session, step: Step) -> str:

@@ -4,7 +4,7 @@ Stop instructions ("stop", "halt everything", "stop husky") do not queue: the ro
 zero velocity published from an event loop before any database write (execution.fast_stop, as the STOP button
 does), then execution.control.stop checks, stops again, cancels what was queued and audits. Everything else is
 checked against the step contract (fleetcore.steps) and becomes one Execution per robot, run by the Celery
-workers (execution.tasks.execute_instruction). A database that fails midway leaves no row behind.
+workers (execution.tasks.drain_robot, one per robot). A database that fails midway leaves no row behind.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import live
 from access.leases import ControlRefused
 from access.roles import can_control
 from audit import records as audit
-from execution import dispatch, fast_stop
+from execution import dispatch, fast_stop, queries
 from execution.models import Instruction
 from fleetcore.states import Event
 from robots.models import Robot
@@ -58,6 +58,15 @@ def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to, r
         return _ask(instruction, result)
     if _is_stop(result):
         return _stop(instruction, result, user)
+    if not result.get("steps"):  # "don't move tiago": understood, and nothing is to be done
+        return _close(instruction, Instruction.Status.SUCCEEDED, result.get("reason") or "Nothing to do.")
+    if queries.is_question(result):  # answered now from live state; nothing moves, nothing queues
+        try:
+            words, about = queries.answer(result, robot_ids)
+        except dispatch.Refused as exc:
+            return _close(instruction, Instruction.Status.REFUSED, str(exc))
+        instruction.robots.set(about)
+        return _close(instruction, Instruction.Status.SUCCEEDED, words)
     try:
         plan = dispatch.plan(result, user, check_schedule=source != "schedule", selected=robot_ids)
         dispatch.dispatch(instruction, plan)
@@ -131,10 +140,15 @@ def _is_stop(result: dict) -> bool:
 
 
 def _stop_names(result: dict) -> set[str] | str:
-    """The robots a stop instruction names, or "all" ("stop", "stop all", "halt everything")."""
+    """The robots a stop instruction names, or "all" ("stop", "stop all", "halt everything"); "stop every robot
+    except husky" names the others (one query, only for a subject chosen by kind or exclusion)."""
     names = set()
     for step in result.get("steps", []):
         robots = step.get("robots")
+        if isinstance(robots, dict) and (robots.get("except") or robots.get("model")):
+            rows = Robot.objects.only("name", "model", "drive")
+            names |= {robot.name for robot in rows if dispatch.matches(robot, robots)}
+            continue
         if not isinstance(robots, list) or not robots:
             return "all"
         names |= set(robots)

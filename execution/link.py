@@ -14,46 +14,12 @@ import time
 from dataclasses import dataclass
 
 from fleetcore import geometry, motion
-from robots.models import Binding, Robot
-
-NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE = "move_base", "nav2", "simple"
+from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, CommandSurface
+from robots.models import Robot
 
 
 class LinkError(RuntimeError):
     """The robot cannot be commanded: no binding for the action, or the endpoint is down."""
-
-
-def bindings_of(robot: Robot) -> dict[str, Binding]:
-    return {b.action: b for b in robot.bindings.all() if b.target}
-
-
-def navigation_kind(binding: Binding | None) -> str | None:
-    """How the robot's navigate binding takes goals: move_base action, nav2 action, or a PoseStamped topic."""
-    if binding is None:
-        return None
-    kind = binding.message_type or ""
-    if "NavigateToPose" in kind:
-        return NAV_NAV2
-    if "MoveBase" in kind or binding.target.rstrip("/").endswith("move_base"):
-        return NAV_MOVE_BASE
-    if kind.endswith("PoseStamped"):
-        return NAV_SIMPLE
-    return None
-
-
-def action_namespace(target: str) -> str:
-    """The action's name from a bound target such as /move_base/goal or /navigate_to_pose/_action/send_goal."""
-    for suffix in (
-        "/_action/send_goal",
-        "/_action/feedback",
-        "/_action/status",
-        "/goal",
-        "/status",
-        "/result",
-    ):
-        if target.endswith(suffix):
-            return target[: -len(suffix)]
-    return target.rstrip("/")
 
 
 def client_for(robot: Robot):
@@ -65,19 +31,17 @@ def client_for(robot: Robot):
         raise LinkError(f"{robot.name}: cannot reach {robot.endpoint}: {exc}") from exc
 
 
-def publish_zero(robot: Robot, bindings: dict[str, Binding] | None = None) -> None:
+def publish_all(client, publishes) -> None:
+    for topic, message, type_ in publishes:
+        client.publish(topic, message, type_)
+
+
+def publish_zero(robot: Robot) -> None:
     """Publish a zero velocity on the robot's move topic and cancel its ROS 1 navigation goal, now."""
-    bindings = bindings if bindings is not None else bindings_of(robot)
-    move = bindings.get("move")
-    if move is None:
+    surface = CommandSurface.of(robot)
+    if not surface.can_move:
         raise LinkError(f"{robot.name}: no move topic is bound")
-    client = client_for(robot)
-    message = motion.velocity_message(0.0, 0.0, move.message_type, robot.ros_version, time.time())
-    client.publish(move.target, message, move.message_type or "geometry_msgs/Twist")
-    navigate = bindings.get("navigate")
-    if navigation_kind(navigate) == NAV_MOVE_BASE:
-        cancel = f"{action_namespace(navigate.target)}/cancel"
-        client.publish(cancel, motion.goal_id("", time.time()), "actionlib_msgs/GoalID")
+    publish_all(client_for(robot), surface.zero())
 
 
 class Latest:
@@ -117,14 +81,15 @@ class RobotLink:
 
     def __init__(self, robot: Robot) -> None:
         self.robot = robot
-        self.bindings = bindings_of(robot)
-        self.move = self.bindings.get("move")
-        if self.move is None:
+        bound = {b.action: b for b in robot.bindings.all() if b.target}
+        self.surface = CommandSurface.of(robot, bound.values())
+        if not self.surface.can_move:
             raise LinkError(f"{robot.name}: no move topic is bound; choose one on its registration page")
-        self.odometry = self.bindings.get("odometry")
+        self.odometry = bound.get("odometry")
         if self.odometry is None:
             raise LinkError(f"{robot.name}: no odometry topic is bound; choose one on its registration page")
-        self.nav_kind = navigation_kind(self.bindings.get("navigate"))
+        self.amcl = bound.get("pose")
+        self.nav_kind = self.surface.nav_kind
         self.start = tuple(robot.start_pose) if robot.start_pose else (0.0, 0.0, 0.0)
         self.local = None  # the last odometry pose, in the odometry frame
         self.poses = Latest()
@@ -138,11 +103,10 @@ class RobotLink:
         self._subscribe(
             self.odometry.target, self.odometry.message_type or "nav_msgs/Odometry", self._on_odom
         )
-        pose = self.bindings.get("pose")
-        if pose is not None:
-            self._subscribe(pose.target, pose.message_type or "", self._on_amcl)
+        if self.amcl is not None:
+            self._subscribe(self.amcl.target, self.amcl.message_type or "", self._on_amcl)
         if self.nav_kind == NAV_MOVE_BASE:
-            ns = action_namespace(self.bindings["navigate"].target)
+            ns = self.surface.nav_namespace
             self._subscribe(f"{ns}/status", "actionlib_msgs/GoalStatusArray", self.nav_status.put)
         return self
 
@@ -181,8 +145,7 @@ class RobotLink:
 
     # ----- commands -----
     def velocity(self, v: float, w: float) -> None:
-        message = motion.velocity_message(v, w, self.move.message_type, self.robot.ros_version, time.time())
-        self.client.publish(self.move.target, message, self.move.message_type or "geometry_msgs/Twist")
+        self.client.publish(*self.surface.velocity(v, w))
 
     def halt(self, goal: Goal | None = None) -> None:
         """Zero velocity, and cancel the navigation goal if one is in flight."""
@@ -192,22 +155,19 @@ class RobotLink:
 
     def navigate(self, x: float, y: float, yaw: float, goal_id: str) -> Goal:
         """Send a navigation goal the way this robot's stack takes it."""
-        target = self.bindings["navigate"]
         now = time.time()
         if self.nav_kind == NAV_MOVE_BASE:
-            ns = action_namespace(target.target)
-            message = motion.move_base_goal(x, y, yaw, goal_id, now)
-            self.client.publish(f"{ns}/goal", message, "move_base_msgs/MoveBaseActionGoal")
+            self.client.publish(*self.surface.move_base_goal(x, y, yaw, goal_id, now))
             return Goal(NAV_MOVE_BASE, goal_id, (x, y))
         if self.nav_kind == NAV_NAV2:
-            ns = action_namespace(target.target)
             handle = self.client.send_action_goal(
-                ns, "nav2_msgs/action/NavigateToPose", motion.navigate_to_pose_goal(x, y, yaw, now)
+                self.surface.nav_namespace,
+                "nav2_msgs/action/NavigateToPose",
+                motion.navigate_to_pose_goal(x, y, yaw, now),
             )
             result = asyncio.run_coroutine_threadsafe(handle.wait(None), self.client.runner.loop)
             return Goal(NAV_NAV2, handle.id, (x, y), handle, result)
-        message = motion.pose_stamped(x, y, yaw, now, self.robot.ros_version)
-        self.client.publish(target.target, message, target.message_type)
+        self.client.publish(*self.surface.simple_goal(x, y, yaw, now))
         return Goal(NAV_SIMPLE, goal_id, (x, y))
 
     def goal_outcome(self, goal: Goal, pose) -> str | None:
@@ -229,21 +189,18 @@ class RobotLink:
     @property
     def can_dock(self) -> bool:
         """Whether the robot has a docking action server bound (a ROS 2 action such as the Create 3's dock)."""
-        return "dock" in self.bindings and self.robot.ros_version == 2
+        return self.surface.can_dock
 
     def dock(self) -> Goal:
         """Start the robot's own docking action; follow it with goal_outcome, stop it with cancel."""
-        binding = self.bindings["dock"]
-        ns = action_namespace(binding.target)
-        action_type = binding.message_type or "irobot_create_msgs/action/Dock"
-        handle = self.client.send_action_goal(ns, action_type, {})
+        surface = self.surface
+        handle = self.client.send_action_goal(surface.dock_namespace, surface.dock_type, {})
         result = asyncio.run_coroutine_threadsafe(handle.wait(None), self.client.runner.loop)
         return Goal(NAV_NAV2, handle.id, tuple(self.robot.start_pose or (0.0, 0.0))[:2], handle, result)
 
     def cancel(self, goal: Goal) -> None:
         if goal.kind == NAV_MOVE_BASE:
-            ns = action_namespace(self.bindings["navigate"].target)
-            self.client.publish(f"{ns}/cancel", motion.goal_id(goal.id, time.time()), "actionlib_msgs/GoalID")
+            self.client.publish(*self.surface.cancel_move_base(goal.id))
         elif goal.kind == NAV_NAV2:
             self.client.cancel_action_goal(goal.handle)
 

@@ -148,12 +148,14 @@ class ExecutionQuerySet(models.QuerySet):
         for execution in rows.order_by("created_at"):
             if execution.robot_id in current:
                 continue
+            steps = execution.steps or []
             current[execution.robot_id] = {
                 "id": execution.instruction_id,
                 "text": execution.instruction.text,
                 "status": execution.status,
+                "step": min(execution.step_index, len(steps) - 1) + 1 if steps else None,
+                "steps": len(steps),
             }
-            steps = execution.steps or []
             step = steps[min(execution.step_index, len(steps) - 1)] if steps else {}
             destination = step.get("destination") if isinstance(step, dict) else None
             if destination and destination.get("x") is not None:

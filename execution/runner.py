@@ -1,8 +1,9 @@
 """Run executions: each robot's queue drained by whoever holds its Redis lock, one execution at a time.
 
-A Celery task for an instruction starts one thread per robot of the instruction. A thread that gets the
-robot's lock runs the robot's queued executions in order (the instruction's own and any queued behind it,
-whoever sent them); a thread that does not get it leaves its execution queued for the holder. A preempting
+Dispatch wakes each robot of an instruction with one Celery task (execution.tasks.drain_robot: the robot's
+executor). A task that gets the robot's lock runs the robot's queued executions in order (the instruction's own
+and any queued behind it, whoever sent them); a task that does not get it leaves its execution queued for the
+holder. A preempting
 execution is named in the robot's preempt flag: the holder interrupts the current execution (back in the
 queue, at the step it reached) and runs the preemptor next.
 """
@@ -10,9 +11,8 @@ queue, at the step it reached) and runs the preemptor next.
 from __future__ import annotations
 
 import logging
-import threading
 
-from django.db import close_old_connections, connections
+from django.db import close_old_connections
 from django.utils import timezone
 
 import alerts
@@ -35,34 +35,6 @@ OUTCOME_EVENT = {
     "failed": Event.FAIL,
     "preempted": Event.PREEMPT,
 }
-
-
-def execute_instruction(instruction_id: int) -> list[int]:
-    """Run every robot's share of an instruction, a thread per robot; return the robots this call drained."""
-    robot_ids = sorted(
-        set(
-            Execution.objects.filter(instruction_id=instruction_id, status__in=WAITING).values_list(
-                "robot_id", flat=True
-            )
-        )
-    )
-    drained: list[int] = []
-    threads = [threading.Thread(target=_drain_thread, args=(rid, drained), daemon=True) for rid in robot_ids]
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join()
-    return drained
-
-
-def _drain_thread(robot_id: int, drained: list[int]) -> None:
-    try:
-        if drain_robot(robot_id):
-            drained.append(robot_id)
-    except Exception:
-        log.exception("robot %s: runner crashed", robot_id)
-    finally:
-        connections.close_all()
 
 
 def drain_robot(robot_id: int) -> bool:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 from django.utils import timezone
 from django.utils.module_loading import import_string
+from redis.exceptions import RedisError
 
 from execution import coordination
 from execution.link import RobotLink
@@ -49,6 +50,9 @@ class Stalled(StepFailed):
     def __init__(self, reason: str, pose: tuple[float, float, float]) -> None:
         super().__init__(reason)
         self.pose = pose
+
+
+REDIS_LOST = "executor lost: Redis unreachable, so its lock on the robot cannot be kept"
 
 
 class Interrupted(Exception):
@@ -103,6 +107,13 @@ class Session:
         if not self.heartbeat.held:
             raise Interrupted("failed", "executor lost: its lock on the robot lapsed")
         self.heartbeat.beat()
+        try:
+            self._check_flags()
+        except RedisError as exc:  # no stop flag or preemption can be seen, no lock kept: not ours to drive
+            raise Interrupted("failed", f"{REDIS_LOST} ({exc})") from exc
+
+    def _check_flags(self) -> None:
+        """Store the pose now and then; raise Interrupted if the robot was stopped or preempted."""
         if time.monotonic() - self.last_store > STORE_POSE_EVERY:
             self.last_store = time.monotonic()
             if self.link.poses.value is not None:
@@ -279,7 +290,10 @@ def run_step(session: Session, step: dict) -> str:
     checked = Step.from_dict(step)
     if checked.spec.handler is None:
         raise StepFailed(f"{session.robot.name}: {checked.action!r} is not something the executor runs")
-    return import_string(checked.spec.handler)(session, checked)
+    try:
+        return import_string(checked.spec.handler)(session, checked)
+    except RedisError as exc:  # e.g. releasing its route as the step ends: the same loss, in a person's words
+        raise Interrupted("failed", f"{REDIS_LOST} ({exc})") from exc
 
 
 def advance(execution: Execution, index: int) -> None:

@@ -2,22 +2,16 @@
 
 from celery import shared_task
 
-from execution import runner, watchdog
-
-
-@shared_task(name="execution.tasks.execute_instruction", acks_late=True, ignore_result=True)
-def execute_instruction(instruction_id: int) -> list[int]:
-    """Run an instruction's executions; a redelivery finds them claimed or finished and does nothing twice."""
-    from execution.models import Execution
-
-    robot_ids = Execution.objects.filter(instruction_id=instruction_id).values_list("robot_id", flat=True)
-    watchdog.recover(set(robot_ids))
-    return runner.execute_instruction(instruction_id)
+from execution import runner
 
 
 @shared_task(name="execution.tasks.drain_robot", acks_late=True, ignore_result=True)
 def drain_robot(robot_id: int) -> bool:
-    """Run a robot's waiting executions if no runner holds it."""
+    """The robot's executor: run its waiting executions in order, unless another runner holds its lock.
+
+    One task per robot per wake-up (dispatch sends one for each robot of an instruction; the watchdog one
+    for a robot whose queue stalled); a redelivery finds the executions claimed or finished and does nothing.
+    """
     return runner.drain_robot(robot_id)
 
 

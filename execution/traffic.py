@@ -54,6 +54,7 @@ MUTEX_TTL_MS = 3000
 WAIT_POLL_S = 0.1  # s between a waiting robot's tries
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
+MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
 PLANNED_SPEED = 0.7  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
 
@@ -251,7 +252,20 @@ def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float) 
     ]
     x, y, at = path[-1]
     entry = {"cells": cells, "goal": [x, y], "r": radius, "at": at, "expires": at + WAIT_LIMIT_S * 2}
+    entry["path"] = [[round(p[0], 2), round(p[1], 2)] for p in path[:: max(1, len(path) // MAP_POINTS)]]
+    entry["path"].append([round(x, 2), round(y, 2)])  # what a map that opens now draws (routes())
     _put(redis, "plans", robot.pk, entry)
+
+
+def routes(robot_ids) -> dict[int, dict]:
+    """{robot id: {"path": [[x, y], ...], "waiting_for": robot id or None}} of the robots under traffic now,
+    for a page that opens while they drive (live.path sends the changes after)."""
+    redis, wanted = coordination.connection(), set(robot_ids)
+    waits = {pk: entry.get("for") for pk, entry in _hash(redis, "waits").items() if pk in wanted}
+    plans = {pk: entry.get("path", []) for pk, entry in _hash(redis, "plans").items() if pk in wanted}
+    return {
+        pk: {"path": plans.get(pk, []), "waiting_for": waits.get(pk)} for pk in plans.keys() | waits.keys()
+    }
 
 
 def claim(robot: Robot, start, end, progress=None) -> int | None:

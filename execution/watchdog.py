@@ -4,8 +4,10 @@ A running execution carries the token of the runner that claimed it, and that ru
 robot's lock under the same token every quarter second (execution.coordination.Heartbeat). When the lock is
 gone (or held by another token), the executor is lost: killed, frozen, or its host gone. The scheduler process,
 which stays up, looks every WATCHDOG_S: the robot gets a zero velocity and its navigation goal is cancelled at
-once, the execution is failed with the reason "executor lost", its instruction settled, and an executor_lost
-alert raised.
+once, the execution is failed with the reason "executor lost", its instruction settled, its traffic reservations
+dropped (others then go round it as a robot standing there, instead of waiting out their lapse), and an
+executor_lost alert raised. To send that zero at once, the scheduler keeps a link open to the endpoint of every robot being
+driven (keep_links): connecting at that moment cost up to a second more on a busy machine.
 
 Failed, not resumed: the step was cut at an unknown point (half a rotation, a goal the stack may still hold),
 the robot may since have been moved or stopped by hand, and a robot that starts moving by itself after a
@@ -22,7 +24,7 @@ from datetime import timedelta
 from django.utils import timezone
 
 import alerts
-from execution import coordination
+from execution import coordination, traffic
 from execution.link import publish_zero
 from execution.models import Execution
 from execution.runner import WAITING, settle
@@ -36,28 +38,60 @@ LOST = "executor lost: the process running it stopped renewing its lock; the rob
 
 def lost_executions(robot_ids=None) -> list[Execution]:
     """Running executions whose runner no longer holds the robot's lock (one query, one Redis round trip)."""
+    return _lost(_running(robot_ids))
+
+
+def _running(robot_ids=None) -> list[Execution]:
     running = Execution.objects.filter(status=Execution.Status.RUNNING).select_related("robot")
     if robot_ids is not None:
         running = running.filter(robot_id__in=list(robot_ids))
-    running = list(running)
+    return list(running)
+
+
+def _lost(running: list[Execution]) -> list[Execution]:
     holders = coordination.lock_holders({execution.robot_id for execution in running})
     return [execution for execution in running if holders.get(execution.robot_id) != execution.worker]
 
 
 def recover(robot_ids=None) -> list[int]:
     """Stop the robots of lost executions, fail those executions and settle them; return their keys."""
-    failed = [execution for execution in lost_executions(robot_ids) if _claim_failure(execution)]
+    running = _running(robot_ids)
+    keep_links(execution.robot.endpoint for execution in running)
+    failed = [execution for execution in _lost(running) if _claim_failure(execution)]
     if not failed:
         return []
     with ThreadPoolExecutor(max_workers=min(8, len(failed))) as pool:  # one unreachable robot delays no other
         list(pool.map(_stop, [execution.robot for execution in failed]))
     for execution in failed:
+        traffic.release(execution.robot, None)  # its route and claims, which nobody renews now, free at once
         Robot.objects.transition(execution.robot_id, Event.FAIL, LOST, execution.instruction_id)
         settle(execution.instruction_id)
         alerts.raise_alert(
             "executor_lost", execution.robot, f"instruction #{execution.instruction_id}: {LOST}"
         )
     return [execution.pk for execution in failed]
+
+
+_linking = ThreadPoolExecutor(max_workers=4, thread_name_prefix="watchdog link")
+_linked: set[str] = set()  # endpoints this process has a link to (robots.rosbridge.sync keeps it up)
+
+
+def keep_links(endpoints) -> None:
+    """Open, in the background and once, a link to the endpoint of every robot being driven: the zero after
+    its executor's loss then goes out on a link that is up, not after a connect (a second on a busy machine)."""
+    for endpoint in {endpoint for endpoint in endpoints if endpoint} - _linked:
+        _linked.add(endpoint)
+        _linking.submit(_open_link, endpoint)
+
+
+def _open_link(endpoint: str) -> None:
+    from robots.rosbridge.sync import get_client
+
+    try:
+        get_client(endpoint)
+    except Exception as exc:  # unreachable now: the next look tries again
+        _linked.discard(endpoint)
+        log.info("%s: no link for the watchdog yet: %s", endpoint, exc)
 
 
 def _claim_failure(execution: Execution) -> bool:

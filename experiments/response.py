@@ -65,9 +65,10 @@ def cap_note(link: RobotLink) -> str:
 
 
 async def speed_grid(
-    driver, link: RobotLink, watches, reception, repeats: int, hold_s: float, table: int
+    driver, link: RobotLink, watches, reception, repeats: int, hold_s: float, table: int, on_cell=None
 ) -> dict:
-    """The paper's linear x angular grid on one robot, as Table 3, 4 or 5."""
+    """The paper's linear x angular grid on one robot, as Table 3, 4 or 5; `on_cell()` (a coroutine function,
+    optional) is awaited after each cell, for a run's progress."""
     records, cells = [], []
     for col, u in enumerate(paper.LINEAR_SPEEDS):
         for w in paper.ANGULAR_SPEEDS:
@@ -92,6 +93,8 @@ async def speed_grid(
                         "note": cap_note(link),
                     }
                 )
+            if on_cell is not None:
+                await on_cell()
     return {
         "records": records,
         "cells": cells,

@@ -7,13 +7,17 @@ bench's trial code (bench/response.py) over each robot's bound move and odometry
 import asyncio
 
 from celery import shared_task
-from django.db import transaction
+from django.db import models, transaction
 from django.utils import timezone
 
+from experiments import paper
 from experiments.models import ExperimentRun
 
 KINDS = ("response", "success")
 MAX_TRIALS = 50
+CELLS = [
+    (u, w) for u in paper.LINEAR_SPEEDS for w in paper.ANGULAR_SPEEDS
+]  # a response run's grid, per robot
 
 
 class ExperimentError(ValueError):
@@ -39,7 +43,8 @@ def start_run(kind: str, robots, user, params: dict, confirmed: bool) -> Experim
     trials = params.get("trials", 3)
     if not isinstance(trials, int) or not 1 <= trials <= MAX_TRIALS:
         raise ExperimentError(f"trials: a whole number from 1 to {MAX_TRIALS}")
-    run = ExperimentRun.objects.create(kind=kind, user=user, params={**params, "trials": trials})
+    total = len(robots) * (trials * len(CELLS) if kind == "response" else trials)
+    run = ExperimentRun.objects.create(kind=kind, user=user, params={**params, "trials": trials}, total=total)
     run.robots.set(robots)
     transaction.on_commit(lambda: run_experiment.delay(run.pk))
     return run
@@ -68,8 +73,24 @@ def run_experiment(run_pk: int) -> str:
 def execute(run: ExperimentRun) -> dict:
     robots = list(run.robots.prefetch_related("bindings"))
     if run.kind == "response":
-        return asyncio.run(_response(robots, run.params))
-    return _success(robots, run.user, run.params)
+        return asyncio.run(_response(robots, run.params, Progress(run.pk, per_step=run.params["trials"])))
+    return _success(robots, run.user, run.params, Progress(run.pk))
+
+
+class Progress:
+    """Counts a run's steps done into its row, which the page polls: `step()` in sync code, `await astep()` in
+    an event loop."""
+
+    def __init__(self, run_pk: int, per_step: int = 1):
+        self.run_pk, self.per_step = run_pk, per_step
+
+    def step(self) -> None:
+        ExperimentRun.objects.filter(pk=self.run_pk).update(done=models.F("done") + self.per_step)
+
+    async def astep(self) -> None:
+        from asgiref.sync import sync_to_async
+
+        await sync_to_async(self.step, thread_sensitive=False)()
 
 
 def robot_link(robot):
@@ -85,7 +106,7 @@ def robot_link(robot):
     )
 
 
-async def _response(robots, params: dict) -> dict:
+async def _response(robots, params: dict, progress) -> dict:
     """Start/stop response over the paper's speed grid (capped by each robot's limits), robot by robot."""
     from experiments.drivers import DirectDriver
     from experiments.probe import watch_odometry
@@ -109,6 +130,7 @@ async def _response(robots, params: dict) -> dict:
                 params["trials"],
                 float(params.get("hold_s", 1.0)),
                 table=5,
+                on_cell=progress.astep,
             )
             out[link.name] = {k: grid[k] for k in ("cells", "cap", "start_s", "stop_s")}
     finally:
@@ -117,7 +139,7 @@ async def _response(robots, params: dict) -> dict:
     return {"robots": out}
 
 
-def _success(robots, user, params: dict) -> dict:
+def _success(robots, user, params: dict, progress) -> dict:
     """Type IV instructions ("shift R to G") to each robot's goal; the share that succeeded."""
     import time
 
@@ -137,5 +159,6 @@ def _success(robots, user, params: dict) -> dict:
                     break
                 time.sleep(0.2)
             ok += instruction.status == Instruction.Status.SUCCEEDED
+            progress.step()
         out[robot.name] = {"trials": params["trials"], "succeeded": ok, "rate": ok / params["trials"]}
     return {"goal": goal, "robots": out}

@@ -7,6 +7,7 @@ its death reach the terminal with its name in front. One Ctrl-C stops everything
     FLEET_SIM_PORT_BASE  the simulated endpoints' first port (9090; the demo world uses seven from there)
     FLEET_VAR_DIR        the database, Redis's data, the logs (var/log/) and the supervisor's files (var/)
     REDIS_URL            a Redis to use; unset, an embedded one is run (and restarted) under var/
+    FLEET_SIM_OPTIONS    more options for the simulator (e.g. `--keep-last-command`, as the chaos tests run it)
 
 `supervisorctl -c var/supervisord.conf status` shows the processes while it runs.
 """
@@ -14,6 +15,7 @@ its death reach the terminal with its name in front. One Ctrl-C stops everything
 from __future__ import annotations
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
@@ -40,6 +42,7 @@ class Setup:
     var_dir: Path
     world: str
     redis_url: str | None  # None: the embedded Redis
+    sim_options: tuple[str, ...] = ()
 
     @classmethod
     def from_env(cls, environ=os.environ) -> Setup:
@@ -49,6 +52,7 @@ class Setup:
             var_dir=Path(environ.get("FLEET_VAR_DIR", BASE_DIR / "var")).resolve(),
             world=environ.get("FLEET_WORLD", "paper"),
             redis_url=environ.get("REDIS_URL") or None,
+            sim_options=tuple(shlex.split(environ.get("FLEET_SIM_OPTIONS", ""))),
         )
 
     @property
@@ -85,7 +89,7 @@ def programs(setup: Setup, python: str = sys.executable) -> list[Program]:
             "worker", [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "32"]
         ),
         Program("control", [*celery, "-n", "control@%h", "-Q", "control,registration", "-c", "1"]),
-        Program("sim", [*manage, "simworker", "--world", setup.world, *sim_ports]),
+        Program("sim", [*manage, "simworker", "--world", setup.world, *sim_ports, *setup.sim_options]),
         Program("links", [*manage, "robotlinks", "--register-world", setup.world, *sim_ports]),
         # time slots, lost workers, stalled robot queues (issue 6)
         Program("scheduler", [*manage, "scheduler"]),

@@ -37,6 +37,7 @@ FLEET_APPS = [
     "fleet",
     "portal",
     "experiments",
+    "recordings",
     "execution",
     "interpreter",
     "access",
@@ -56,6 +57,8 @@ INSTALLED_APPS = [
     "django.contrib.staticfiles",
     "channels",
     "axes",
+    # ninja as an app serves Swagger UI from its own static files (ninja/static/ninja/), not from a CDN
+    "ninja",
     *FLEET_APPS,
 ]
 
@@ -96,7 +99,7 @@ DEFAULT_AUTO_FIELD = "django.db.models.BigAutoField"
 
 CACHES = {
     "default": {
-        "BACKEND": "django.core.cache.backends.redis.RedisCache",
+        "BACKEND": "fleet.cache.RedisCache",  # one client per pool (fleet/cache.py)
         "LOCATION": REDIS_URL,
         "KEY_PREFIX": os.environ.get("FLEET_REDIS_PREFIX", "fleet"),
     }
@@ -203,6 +206,8 @@ LOGGING = {
 
 # The fleet's own knobs.
 FLEET_WORLD = os.environ.get("FLEET_WORLD", "paper")
+# The simulated endpoints' first port (as `make run` starts them): the registration page's prefill.
+FLEET_SIM_PORT_BASE = env_int("FLEET_SIM_PORT_BASE", 9090, minimum=1, maximum=65535)
 # The demo world's Table 12 slots are loaded disabled unless this is set, so that a person's instruction is not
 # refused because `make run` happened to start inside a slot; enable them in the admin or with this variable.
 FLEET_DEMO_SCHEDULES = env_bool("FLEET_DEMO_SCHEDULES", default=False)
@@ -223,6 +228,8 @@ FLEET_EXEC_KEY_PREFIX = os.environ.get("FLEET_EXEC_KEY_PREFIX", "fleet:exec")
 FLEET_ROBOT_MAX_FRAME_MB = env_int("FLEET_ROBOT_MAX_FRAME_MB", 16, minimum=1)
 FLEET_ROBOT_MAX_TOPICS = env_int("FLEET_ROBOT_MAX_TOPICS", 100_000, minimum=1)
 FLEET_ROBOT_MAX_URDF_MB = env_int("FLEET_ROBOT_MAX_URDF_MB", 4, minimum=1)
+# a whole endpoint's discovery (an endpoint with hundreds of namespaced robots takes longer than the default)
+FLEET_DISCOVERY_TIMEOUT_S = env_int("FLEET_DISCOVERY_TIMEOUT_S", 15, minimum=1, maximum=3600)
 FLEET_ROBOT_ALLOWED_NETWORKS = env_networks(
     "FLEET_ROBOT_ALLOWED_NETWORKS",
     ["127.0.0.0/8", "::1/128", "10.0.0.0/8", "172.16.0.0/12", "192.168.0.0/16", "fc00::/7"],

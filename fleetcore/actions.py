@@ -38,6 +38,11 @@ class Action:
     synonyms: tuple[str, ...] = ()
     description: str = ""
     unnamed: str = "any"  # who does it when no robot is named: "any" (the one best robot) or "all"
+    unit: str | None = (
+        None  # what the step's amount measures (fleetcore.steps.UNITS): "m", "deg", "s", "times"
+    )
+    measured: tuple[tuple[str, str], ...] = ()  # said with an amount of this unit, it is that action instead
+    loop_of: str | None = None  # a loop over its destinations: each visit is a step of this action (patrol)
 
     @property
     def priority(self) -> int:
@@ -58,20 +63,20 @@ ACTIONS: dict[str, Action] = {
             "move", "motion", State.MOTION, "execution.handlers.go_to", DRIVE, Stop.CANCEL,
             takes_destination=True, requires_destination=True, accepts=PLACES,
             synonyms=("shift", "go", "proceed", "walk", "advance", "head", "drive", "travel", "roll",
-                      "relocate", "march", "come", "make your way", "head over"),
-            description="drive to a destination",
+                      "relocate", "march", "come", "make your way", "head over", "send", "dispatch"),
+            description="drive to a destination", measured=(("m", "move_by"),),
         ),
         Action(
             "navigate", "motion", State.MOTION, "execution.handlers.go_to", DRIVE, Stop.CANCEL,
             takes_destination=True, requires_destination=True, accepts=PLACES,
             synonyms=("steer", "pilot", "find your way", "plan a path"),
-            description="plan a path to a destination",
+            description="plan a path to a destination", measured=(("m", "move_by"),),
         ),
         Action(
             "rotate", "task", State.WORK, "execution.handlers.task", (("move",), ("odometry", "pose")),
             countable=True,
-            synonyms=("turn", "spin", "revolve", "twirl", "pivot", "turn around", "spin around"),
-            description="turn on the spot, n times",
+            synonyms=("turn", "spin", "revolve", "twirl", "pivot", "spin around"),
+            description="turn on the spot, n times", measured=(("deg", "turn_by"),),
         ),
         Action(
             "clean", "task", State.WORK, "execution.handlers.task", (("move",), ("odometry", "pose")),
@@ -89,7 +94,13 @@ ACTIONS: dict[str, Action] = {
             "dock", "control", State.MOTION, "execution.handlers.dock", (("dock", "move", "navigate"),),
             Stop.CANCEL,
             synonyms=("go home", "return home", "go back home", "return to base", "go to base", "go to dock",
-                      "go to the dock", "go back to base", "come home", "come back"),
+                      "go to the dock", "go back to base", "come home", "come back", "head home", "drive home",
+                      "return to your start", "return to start", "return to the start", "go back to start",
+                      "go back to your start", "come back to your start", "come back to start",
+                      "go back to where you started", "return to where you started",
+                      "come back to where you started", "back to where you started", "back to your start",
+                      "go to your start", "return to your starting point", "go back to your starting point",
+                      "return to your start position", "go back to the start"),
             description="go to the robot's dock (its docking action where it has one) or its start pose",
         ),
         Action(
@@ -98,6 +109,60 @@ ACTIONS: dict[str, Action] = {
             synonyms=("locate", "where is", "where are", "where are you", "report position",
                       "report your position", "what is your position", "tell me where"),
             description="say where the robot is",
+        ),
+        Action(
+            "move_by", "motion", State.MOTION, "execution.handlers.move_by", DRIVE, unit="m",
+            synonyms=("move by", "drive by", "go by"),
+            description="drive straight ahead (or back, when negative) by a distance in metres",
+        ),
+        Action(
+            "turn_by", "motion", State.MOTION, "execution.handlers.turn_by", (("move",), ("odometry", "pose")),
+            unit="deg", synonyms=("turn by", "rotate by", "spin by"),
+            description="turn on the spot by an angle in degrees (left, anticlockwise, when positive)",
+        ),
+        Action(
+            "wait", "control", State.MOTION, "execution.handlers.wait", (), unit="s",
+            synonyms=("hold", "linger", "stay", "stand by", "rest", "idle", "sleep", "remain", "stay put",
+                      "wait there", "hang on"),
+            description="stay where it is for a number of seconds",
+        ),
+        Action(
+            "repeat", "control", State.MOTION, "execution.handlers.repeat", (), unit="times", countable=True,
+            synonyms=("do it again", "loop", "keep going", "keep repeating", "do that again"),
+            description="do the steps before it again (a number of times, or until stopped)",
+        ),
+        Action(
+            "patrol", "motion", State.MOTION, None, DRIVE, Stop.CANCEL,
+            takes_destination=True, requires_destination=True, accepts=PLACES, countable=True, loop_of="move",
+            synonyms=("go back and forth", "shuttle", "circulate", "make rounds", "do rounds", "go round",
+                      "guard", "keep watch over", "tour", "cycle through", "loop through"),
+            description="visit the places in turn, round after round (until stopped unless rounds are said)",
+        ),
+        Action(
+            "report_status", "query", State.DIALOG, None, stop=Stop.NONE,
+            synonyms=("what is", "what's", "whats", "what are", "status", "status of", "state of",
+                      "report status", "how is", "how are", "what is the status of", "is busy", "busy"),
+            description="say what the robot is doing",
+        ),
+        Action(
+            "list_free", "query", State.DIALOG, None, stop=Stop.NONE, unnamed="all",
+            synonyms=("which robots are free", "which robot is free", "which are free", "who is free",
+                      "which robots are available", "which robot is available", "which robots are idle",
+                      "list free robots", "free robots", "available robots", "idle robots", "is anyone free",
+                      "is any robot free", "are any robots free", "who is available", "which ones are free"),
+            description="say which robots are free to take an instruction",
+        ),
+        Action(
+            "report_distance", "query", State.DIALOG, None, stop=Stop.NONE, takes_destination=True,
+            requires_destination=True, accepts=PLACES,
+            synonyms=("how far", "how far away", "distance", "distance of", "how far is it"),
+            description="say how far the robot is from a place (its planned path and the straight line)",
+        ),
+        Action(
+            "list_abilities", "query", State.DIALOG, None, stop=Stop.NONE,
+            synonyms=("what can", "capabilities", "capabilities of", "abilities of", "what are the abilities of",
+                      "what is able to do", "skills of"),
+            description="say which actions the robot can do with what it has bound",
         ),
     )
 }  # fmt: skip

@@ -99,6 +99,69 @@ class Rotate:
         return Command(0.0, max(min(w_max, K_ANGULAR * remaining), 0.2 * w_max))
 
 
+@dataclass
+class Straight:
+    """Drive straight by a distance along the heading it starts with (back when negative), holding that heading."""
+
+    distance: float
+    limits: Limits
+    factor: float = SPEEDS[DEFAULT_SPEED]
+    tolerance: float = 0.02
+    start: tuple[float, float, float] | None = None
+
+    def command(self, pose: tuple[float, float, float]) -> Command:
+        if self.start is None:
+            self.start = pose
+        x0, y0, yaw0 = self.start
+        sign = 1.0 if self.distance >= 0 else -1.0
+        along = ((pose[0] - x0) * math.cos(yaw0) + (pose[1] - y0) * math.sin(yaw0)) * sign
+        remaining = abs(self.distance) - along
+        if remaining <= self.tolerance:
+            return STOP
+        v_max, w_max = self.limits.linear * self.factor, self.limits.angular * self.factor
+        v = min(v_max, max(K_LINEAR * remaining, 0.25 * v_max))
+        return Command(sign * v, clamp(K_ANGULAR * wrap(yaw0 - pose[2]), w_max))
+
+
+@dataclass
+class TurnBy:
+    """Turn on the spot by an angle (radians; anticlockwise when positive), counting the yaw actually turned."""
+
+    angle: float
+    limits: Limits
+    factor: float = SPEEDS[DEFAULT_SPEED]
+    tolerance: float = 0.03
+    turned: float = 0.0
+    _last: float | None = None
+
+    def command(self, pose: tuple[float, float, float]) -> Command:
+        if self._last is not None:
+            self.turned += wrap(pose[2] - self._last)
+        self._last = pose[2]
+        remaining = self.angle - self.turned
+        if abs(remaining) <= self.tolerance:
+            return STOP
+        w_max = self.limits.angular * self.factor
+        return Command(0.0, _at_least(clamp(K_ANGULAR * remaining, w_max), 0.15 * w_max))
+
+
+@dataclass
+class Face:
+    """Turn on the spot to a heading (a goal given with one, e.g. dragged on the map), the short way round."""
+
+    yaw: float
+    limits: Limits
+    factor: float = SPEEDS[DEFAULT_SPEED]
+    tolerance: float = 0.05  # rad
+
+    def command(self, pose: tuple[float, float, float]) -> Command:
+        error = wrap(self.yaw - pose[2])
+        if abs(error) <= self.tolerance:
+            return STOP
+        w_max = self.limits.angular * self.factor
+        return Command(0.0, math.copysign(max(min(w_max, K_ANGULAR * abs(error)), 0.2 * w_max), error))
+
+
 def coverage_waypoints(
     center: tuple[float, float], size: float = CLEAN_SIZE, lanes: int = CLEAN_LANES
 ) -> list[tuple[float, float]]:

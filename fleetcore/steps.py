@@ -1,7 +1,10 @@
 """The step contract: what the interpreter emits, `submit` validates, dispatch splits and the executor runs.
 
 A step is one action for some robots: where to (a destination), what to do there (a task such as rotate(3) or
-clean), how fast (a speed word). It travels as a dict (JSON in the database and on the wire) and is checked by
+clean), how fast (a speed word), how much (an amount in the unit its action measures: metres for move_by,
+degrees for turn_by, seconds for wait, times for repeat) and, for a repeat, how many steps before it it repeats
+(span; a repeat without an amount runs until the robot is stopped). Robots are names, "all", "any", or a
+subject object {"all"|"any": true, "model": word, "except": [names]} ("every robot except husky", "a turtlebot"). It travels as a dict (JSON in the database and on the wire) and is checked by
 `Step.from_dict`, which raises StepError with a sentence for a person. Speed words live here, once: the
 interpreter's phrases map onto them and the executor turns them into a fraction of each robot's limits.
 """
@@ -10,7 +13,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 from fleetcore import actions
 
@@ -18,6 +21,35 @@ from fleetcore import actions
 SPEEDS: dict[str, float] = {"very slow": 0.2, "slow": 0.35, "normal": 0.6, "fast": 0.85, "very fast": 1.0}
 DEFAULT_SPEED = "normal"
 ALL, ANY = "all", "any"  # every free robot; the one best robot (allocation)
+# Unit words -> (unit, factor to it). The interpreter's phrases of amounts map onto these, the handlers read the
+# unit of their action (fleetcore.actions.Action.unit).
+UNITS: dict[str, tuple[str, float]] = {
+    **dict.fromkeys(("m", "meter", "meters", "metre", "metres", "mtr", "mtrs"), ("m", 1.0)),
+    **dict.fromkeys(("cm", "centimeter", "centimeters", "centimetre", "centimetres"), ("m", 0.01)),
+    **dict.fromkeys(("mm", "millimeter", "millimeters", "millimetre", "millimetres"), ("m", 0.001)),
+    **dict.fromkeys(("ft", "foot", "feet"), ("m", 0.3048)),
+    **dict.fromkeys(("deg", "degree", "degrees", "°"), ("deg", 1.0)),
+    **dict.fromkeys(("s", "sec", "secs", "second", "seconds"), ("s", 1.0)),
+    **dict.fromkeys(("min", "mins", "minute", "minutes"), ("s", 60.0)),
+}
+# Direction words -> (unit, sign, the amount meant when none is said; None: ask for it).
+DIRECTIONS: dict[str, tuple[str, int, float | None]] = {
+    **dict.fromkeys(("forward", "forwards", "ahead", "straight ahead", "onward"), ("m", 1, None)),
+    **dict.fromkeys(("back", "backward", "backwards", "in reverse", "rearward"), ("m", -1, None)),
+    **dict.fromkeys(
+        ("left", "to the left", "anticlockwise", "counterclockwise", "counter clockwise", "anti clockwise"),
+        ("deg", 1, 90.0),
+    ),
+    **dict.fromkeys(("right", "to the right", "clockwise"), ("deg", -1, 90.0)),
+    **dict.fromkeys(("around", "round"), ("deg", 1, 180.0)),  # "turn around": face the other way
+}
+LIMITS: dict[str, float] = {
+    "m": 50.0,
+    "deg": 3600.0,
+    "s": 3600.0,
+    "times": 100.0,
+}  # the largest amount of each
+MAX_SPAN = 200  # steps a repeat may go back over
 TASK_RE = re.compile(r"^(?P<name>[a-z_]+)(?:\((?P<count>\d{1,3}(?:\.\d{1,3})?)\))?$")
 MAX_COUNT = 100
 
@@ -57,6 +89,7 @@ class Destination:
     x: float
     y: float
     around: str | None = None  # the place asked for, when the robot was given a free spot next to it
+    yaw: float | None = None  # the heading to end with (rad, map frame), when one was given
 
     @classmethod
     def from_dict(cls, data) -> Destination:
@@ -69,17 +102,40 @@ class Destination:
         if not (math.isfinite(x) and math.isfinite(y)):
             raise StepError("a destination's x and y must be finite numbers")
         name = str(data.get("name") or f"({x:g}, {y:g})")
-        around = data.get("around")
-        return cls(name, x, y, str(around) if around else None)
+        around, yaw = data.get("around"), data.get("yaw")
+        if yaw is not None and (
+            isinstance(yaw, bool) or not isinstance(yaw, int | float) or not math.isfinite(yaw)
+        ):
+            raise StepError("a destination's yaw must be a finite number (radians)")
+        return cls(name, x, y, str(around) if around else None, None if yaw is None else float(yaw))
+
+
+@dataclass(frozen=True)
+class Subject:
+    """Robots chosen by kind rather than by name: every one (all) or the one best (any), of a model, but some."""
+
+    mode: str  # ALL or ANY
+    model: str | None = None  # a kind word ("turtlebot", "legged"): only robots of that kind
+    exclude: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        out: dict = {self.mode: True}
+        if self.model:
+            out["model"] = self.model
+        if self.exclude:
+            out["except"] = list(self.exclude)
+        return out
 
 
 @dataclass(frozen=True)
 class Step:
     action: str
-    robots: tuple[str, ...] | str  # names, or ALL, or ANY
+    robots: tuple[str, ...] | str | Subject  # names, or ALL, or ANY, or a Subject
     destination: Destination | None = None
     task: str | None = None
     speed: str | None = None
+    amount: float | None = None  # in the unit of the action (Action.unit); None for repeat: until stopped
+    span: int | None = None  # repeat: how many steps before it it repeats
 
     @property
     def spec(self) -> actions.Action:
@@ -114,28 +170,90 @@ class Step:
             parse_task(task)
         speed = data.get("speed") or None
         speed_factor(speed)
-        return cls(name, _robots(data.get("robots")), destination, task, speed)
+        amount, span = _amount(spec, data.get("amount")), _span(spec, data.get("span"))
+        return cls(name, _robots(data.get("robots")), destination, task, speed, amount, span)
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        out["robots"] = list(self.robots) if isinstance(self.robots, tuple) else self.robots
+        robots = self.robots
+        out["robots"] = (
+            list(robots)
+            if isinstance(robots, tuple)
+            else robots.to_dict()
+            if isinstance(robots, Subject)
+            else robots
+        )
+        for key in ("amount", "span"):
+            if out[key] is None:
+                del out[key]
         return out
 
     def for_robot(self, name: str, destination: Destination | None = None) -> Step:
         """This step as one robot's share of it (its own spot, when it was given one)."""
-        return Step(self.action, (name,), destination or self.destination, self.task, self.speed)
+        return replace(self, robots=(name,), destination=destination or self.destination)
 
 
-def _robots(value) -> tuple[str, ...] | str:
+_UNIT_WORDS = {"m": "metres", "deg": "degrees", "s": "seconds", "times": "times"}
+
+
+def _amount(spec: actions.Action, value) -> float | None:
+    """The step's amount, checked against its action's unit and the unit's limit."""
+    if value is None:
+        if spec.unit in ("m", "deg", "s"):
+            raise StepError(f"say how much to {spec.name.replace('_', ' ')} (in {_UNIT_WORDS[spec.unit]})")
+        return None
+    if spec.unit is None:
+        raise StepError(f"'{spec.name}' takes no amount")
+    try:
+        amount = float(value)
+    except (TypeError, ValueError):
+        raise StepError(f"the amount of '{spec.name}' is a number of {_UNIT_WORDS[spec.unit]}") from None
+    limit = LIMITS[spec.unit]
+    low = -limit if spec.unit in ("m", "deg") else 0.0
+    if not (math.isfinite(amount) and low <= amount <= limit and (amount != 0 or spec.unit in ("m", "deg"))):
+        raise StepError(f"'{spec.name}' takes {'more than 0 and ' if low == 0 else ''}up to {limit:g} "
+                        f"{_UNIT_WORDS[spec.unit]}, not {value}")  # fmt: skip
+    return amount
+
+
+def _span(spec: actions.Action, value) -> int | None:
+    if spec.unit != "times":
+        if value is not None:
+            raise StepError(f"'{spec.name}' repeats nothing")
+        return None
+    if not isinstance(value, int) or isinstance(value, bool) or not 1 <= value <= MAX_SPAN:
+        raise StepError(f"a repeat names how many steps before it it repeats (1 to {MAX_SPAN})")
+    return value
+
+
+def _robots(value) -> tuple[str, ...] | str | Subject:
     if value in (None, "", ANY):
         return ANY
     if value == ALL:
         return ALL
+    if isinstance(value, dict):
+        return _subject(value)
     if isinstance(value, list | tuple) and not value:
         raise StepError("Say which robot should do it (a name, 'all robots' or 'any robot').")
     if isinstance(value, list | tuple) and all(isinstance(v, str) and v for v in value):
         return tuple(value)
     raise StepError("robots is a list of robot names, 'all' or 'any'")
+
+
+def _subject(value: dict) -> Subject:
+    modes = [mode for mode in (ALL, ANY) if value.get(mode) is True]
+    model, exclude = value.get("model") or None, value.get("except") or []
+    unknown = set(value) - {ALL, ANY, "model", "except"}
+    if (
+        len(modes) != 1
+        or unknown
+        or not (model is None or isinstance(model, str))
+        or not (isinstance(exclude, list) and all(isinstance(name, str) and name for name in exclude))
+    ):
+        raise StepError(
+            'robots as an object is {"all": true} or {"any": true}, with "model" and "except" if any'
+        )
+    return Subject(modes[0], model, tuple(exclude))
 
 
 def validate(steps) -> list[Step]:

@@ -78,6 +78,11 @@ class World:
                 return ep
         raise KeyError(f"world {self.name!r} has no endpoint {key!r}")
 
+    def robot_endpoint_urls(self, host: str, port_base: int) -> list[str]:
+        """The rosbridge URLs of the endpoints that carry robots, as the simulator serves them from port_base."""
+        used = {r.endpoint for r in self.robots}
+        return [f"ws://{host}:{port_base + ep.port_offset}" for ep in self.endpoints if ep.key in used]
+
     def location(self, name: str) -> LocationSpec:
         """Return the location with this name."""
         for loc in self.locations:
@@ -85,20 +90,29 @@ class World:
                 return loc
         raise KeyError(f"world {self.name!r} has no location {name!r}")
 
-    def add_extra_robots(self, count: int) -> list[RobotSpec]:
-        """Place `count` more namespaced robots on free cells of a grid and return them."""
+    def add_extra_robots(self, count: int, skip: int = 0, spacing: float | None = None) -> list[RobotSpec]:
+        """Place `count` more namespaced robots on free cells of a grid and return them.
+
+        `skip` leaves out the first robots (names and cells) so that simulator shards, each serving its own
+        slice, together place the robots one world with all of them would: no name nor cell served twice.
+        `spacing` (m) overrides the world's grid, to pack more robots (shards given the same one agree).
+        """
         cfg = self.extra
         if count <= 0:
             return []
         if not cfg:
             raise WorldFormatError(f"world {self.name!r} has no 'extra' section for extra robots")
-        spots = _free_spots(self, float(cfg.get("spacing", 0.45)))
-        if count > len(spots):
-            raise WorldFormatError(f"world {self.name!r} fits at most {len(spots)} extra robots, not {count}")
-        first = int(cfg.get("first_index", 1))
+        spots = _free_spots(self, float(spacing or cfg.get("spacing", 0.45)))
+        if skip < 0:
+            raise WorldFormatError(f"extra robots to skip must be 0 or more, not {skip}")
+        if skip + count > len(spots):
+            raise WorldFormatError(
+                f"world {self.name!r} fits at most {len(spots)} extra robots, not {skip} + {count}"
+            )
+        first = int(cfg.get("first_index", 1)) + skip
         added = [
             RobotSpec(f"robot{first + i}", cfg["model"], cfg["endpoint"], f"/robot{first + i}", x, y, 0.0)
-            for i, (x, y) in enumerate(spots[:count])
+            for i, (x, y) in enumerate(spots[skip : skip + count])
         ]
         self.robots.extend(added)
         return added

@@ -63,7 +63,7 @@ def parse_answer(text: str) -> Answer:
         m = pattern.match(clean)
         if m:
             return _answer(kind, m)
-    raise ValueError(f"I did not understand that answer. Try e.g. {', '.join(repr(e) for e in EXAMPLES)}.")
+    raise ValueError("I did not understand that answer.")
 
 
 def _answer(kind: str, m: re.Match) -> Answer:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from rapidfuzz import process
 from rapidfuzz.distance import OSA
 
+from fleetcore.steps import DIRECTIONS, UNITS
 from interpreter.terms import Terms, class_ancestry
 
 WORD_RE = re.compile(
@@ -29,11 +30,20 @@ _SPEED_PHRASES = {
     "|as fast as possible|as fast as you can|asap",
 }
 _GRAMMAR = {
-    "PREP": "to|towards|toward|into|in to|at|till|until|onto|unto|on|up to|over to|as far as|in|inside",
     "ALL": "all|every|each|everyone|everybody|everything|whole fleet|the whole fleet|fleet|all of you",
     "THEN": "then|and then|after that|and after that|afterwards|next|and next|later|finally|followed by",
     "AND": "and|plus|also|as well as|&",
-    "TIMES": "times|time|x|rounds|round|turns",
+    "TIMES": "times|time|x|rounds|round|turns|laps|loops",
+    "PREP": "to|towards|toward|into|in to|at|till|until|onto|unto|on|up to|over to|as far as|in|inside|from|between",
+    "EXCEPT": "except|except for|but|but not|other than|apart from|besides|excluding|save for|not including",
+    "ANY": "any|any one|anyone|anybody|someone|somebody|whichever|nearest|the nearest|closest|the closest"
+    "|nearest free|the nearest free|closest free|the closest free|a free|any free|any available|an available"
+    "|first free|the first free|one of the|any one of the|any of the|a single",
+    "NOT": "not|do not|don't|don’t|dont|never|without|no|do n't|please don't|please do not|must not|mustn't",
+    "FOREVER": "until stopped|until i say stop|until told to stop|until told otherwise|until further notice"
+    "|forever|continuously|indefinitely|nonstop|non-stop|endlessly|over and over|again and again|on repeat"
+    "|in a loop|until i stop you|until you are stopped|until stop|until i say so|all day|round the clock",
+    "FILLER": "right now|right away|first|firstly|for|by|doing|do|done|please first|to start with",
 }
 
 
@@ -43,13 +53,16 @@ def _words(text: str) -> frozenset[str]:
 
 _COUNT_WORDS = {
     "once": 1, "twice": 2, "thrice": 3, "one": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6,
-    "seven": 7, "eight": 8, "nine": 9, "ten": 10,
+    "seven": 7, "eight": 8, "nine": 9, "ten": 10, "eleven": 11, "twelve": 12, "thirteen": 13, "fourteen": 14,
+    "fifteen": 15, "sixteen": 16, "seventeen": 17, "eighteen": 18, "nineteen": 19, "twenty": 20, "thirty": 30,
+    "forty": 40, "fifty": 50, "sixty": 60, "seventy": 70, "eighty": 80, "ninety": 90, "hundred": 100,
+    "half": 0.5, "quarter": 0.25, "a hundred": 100, "one hundred": 100,
 }  # fmt: skip
 FILLERS = _words(
     """please pls plz kindly the a an robot robots bot bots can could would will you u should shall
     must i we want need like me us let lets let's ahead just now right away immediately straight directly
     ok okay hey hi hello thanks thank yourself yourselves itself themselves your their its my our of with
-    there again also too both some bit little so up over back location place waypoint point spot area
+    there again also too both some bit little so up over location place waypoint point spot area
     position coordinates coordinate is are be get make sure try way"""
 )
 # Real English words one typo away from a term: never "correct" these, ask instead.
@@ -225,7 +238,7 @@ class Grammar:
     @staticmethod
     def _fuzzable(word: str, meanings: list[Meaning]) -> bool:
         kinds = {m.kind for m in meanings}
-        return len(word) >= 4 and word.isalpha() and not kinds & {"PLACE", "NUMBER", "TIMES"}
+        return len(word) >= 4 and word.isalpha() and not kinds & {"PLACE", "NUMBER", "TIMES", "UNIT"}
 
     def _add(self, key: tuple[str, ...], meaning: Meaning) -> None:
         if key:
@@ -239,7 +252,11 @@ class Grammar:
             for phrase in spec.split("|"):
                 self._add(phrase_key(phrase), Meaning("SPEED", canonical))
         for word, n in _COUNT_WORDS.items():
-            self._add((word,), Meaning("NUMBER", float(n)))
+            self._add(phrase_key(word), Meaning("NUMBER", float(n)))
+        for word, unit in UNITS.items():
+            self._add(phrase_key(word) or (word,), Meaning("UNIT", unit))
+        for phrase, direction in DIRECTIONS.items():
+            self._add(phrase_key(phrase), Meaning("DIRECTION", direction))
         for word in FILLERS:
             self._add((word,), Meaning("FILLER", word))
 
@@ -310,6 +327,12 @@ def _primary(meanings: list[Meaning]) -> Meaning:
         "ALL",
         "THEN",
         "AND",
+        "DIRECTION",
+        "UNIT",
+        "EXCEPT",
+        "ANY",
+        "NOT",
+        "FOREVER",
         "FILLER",
     )
     return min(meanings, key=lambda m: order.index(m.kind) if m.kind in order else len(order))

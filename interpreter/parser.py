@@ -13,8 +13,21 @@ import unicodedata
 from dataclasses import dataclass, field
 
 from fleetcore.actions import ACTIONS
-from fleetcore.steps import ALL, ANY
-from interpreter.lexicon import Grammar, Meaning, Place
+from fleetcore.steps import ANY
+from interpreter import forms
+from interpreter.lexicon import Grammar, Meaning, Place, phrase_key
+from interpreter.problems import (
+    DEST_CHECKS,
+    LOOP_PROBLEMS,
+    Problem,
+    example_robot,
+    missing_amount,
+    missing_destination,
+    no_action,
+    reason_of,
+    stray_word,
+    unknown_verb,
+)
 
 MAX_WORDS = 300
 _INVISIBLE_RE = re.compile("[\u00ad\u180e\u200b-\u200f\u202a-\u202e\u2060-\u2064\ufeff]")
@@ -22,8 +35,8 @@ _NUM = r"[-+]?\d+(?:\.\d+)?"
 _TOKEN_RE = re.compile(
     rf"""(?P<coord>[(\[]\s*(?P<cx>{_NUM})\s*[,;]?\s*(?P<cy>{_NUM})\s*[)\]])
     |(?P<xy>(?<![^\W\d_])x\s*[:=]?\s*(?P<xx>{_NUM})\s*,?\s*(?:and\s+)?y\s*[:=]?\s*(?P<yy>{_NUM}))
-    |(?P<num>{_NUM})(?!\w)
-    |(?P<word>[^\W_]+(?:['’_-][^\W_]+)*)
+    |(?P<num>{_NUM})(?P<suffix>cm|mm|m|secs|sec|s|mins|min|deg|x|°)?(?!\w)
+    |(?P<word>°|[^\W_]+(?:['’_-][^\W_]+)*)
     |(?P<stop>[;.!?]+)
     |(?P<comma>,)""",
     re.X | re.I,
@@ -63,19 +76,28 @@ class StepDraft:
     count: int | None = None
     speed: str | None = None
     continuation: bool = False
+    amount: float | None = None  # said with a unit (in that unit, after its factor)
+    unit: str | None = None
+    direction: tuple | None = None  # (unit, sign, amount meant when none is said)
+    forever: bool = False
+    negated: bool = False
+    any: bool = False
+    model: str | None = None
+    exclude: list[str] = field(default_factory=list)
+    loop: int | None = None  # the loop (patrol) this visit belongs to
+    inherited_action: bool = False
 
     def empty(self) -> bool:
         return not (
-            self.action or self.unknown_verb or self.robots or self.all or self.dest or self.task_action
+            self.action
+            or self.unknown_verb
+            or self.robots
+            or self.all
+            or self.dest
+            or self.task_action
+            or self.amount is not None
+            or self.direction
         )
-
-
-@dataclass
-class Problem:
-    level: str  # III (semantic) or V (not programmed)
-    code: str
-    word: str
-    question: str
 
 
 @dataclass
@@ -89,6 +111,7 @@ class Interpretation:
     question: str | None = None
     corrections: dict[str, str] = field(default_factory=dict)
     problems: list[Problem] = field(default_factory=list)
+    not_done: list[str] = field(default_factory=list)  # what the text said not to do
 
     @property
     def valid(self) -> bool:
@@ -104,6 +127,7 @@ class Interpretation:
             "steps": self.steps,
             "synonyms_used": self.synonyms_used,
             "reason": self.reason,
+            "answer_example": next((p.example for p in self.problems if p.example), None),
         }
 
 
@@ -118,12 +142,14 @@ def tokenize(text: str) -> list[tuple[str, str, object]]:
     """Split text into (kind, lower-case text, value) tokens; kinds W N C S M."""
     tokens = []
     for m in _TOKEN_RE.finditer(text):
-        group = m.lastgroup
+        group = "num" if m.group("num") is not None else m.lastgroup
         if group in {"coord", "xy"}:
             a, b = (m.group("cx"), m.group("cy")) if group == "coord" else (m.group("xx"), m.group("yy"))
             tokens.append(("C", m.group(), _coords(a, b)))
         elif group == "num":
-            tokens.append(("N", m.group(), _number(m.group())))
+            tokens.append(("N", m.group("num"), _number(m.group("num"))))
+            if m.group("suffix"):
+                tokens.append(("W", m.group("suffix").casefold(), m.group("suffix")))
         elif group == "word":
             tokens.append(("W", m.group().casefold(), m.group()))
         else:
@@ -155,6 +181,7 @@ class _Lexer:
         self.grammar = grammar
         self.items: list[Item] = []
         self.prev = "START"
+        self.last_word = ""
         self.seen_dest = False
 
     def run(self, tokens: list[tuple[str, str, object]]) -> list[Item]:
@@ -181,7 +208,8 @@ class _Lexer:
         for length in range(min(self.grammar.max_len, n - i), 0, -1):
             meanings = self.grammar.table.get(tuple(texts[i : i + length]))
             if meanings:
-                meaning = self._resolve(meanings)
+                raw = tokens[i][2]
+                meaning = self._resolve(meanings, length == 1 and isinstance(raw, str) and raw.isupper())
                 if meaning is not None:
                     phrase = " ".join(texts[i : i + length])
                     self._emit(Item(meaning.kind, meaning.value, phrase, meaning.synonym))
@@ -197,9 +225,12 @@ class _Lexer:
             self._emit(Item(meaning.kind, meaning.value, text, meaning.synonym, corrected_from=text))
         return 1
 
-    def _resolve(self, meanings: list[Meaning]) -> Meaning | None:
-        dest_ctx = self.prev in {"PREP", "CLASSWORD"} or (
-            self.prev in {"THEN", "AND", "COMMA"} and self.seen_dest
+    def _resolve(self, meanings: list[Meaning], letter: bool = False) -> Meaning | None:
+        """letter: the word is one capital letter right after an action ("patrol A and B"): a place's name."""
+        dest_ctx = (
+            self.prev in {"PREP", "CLASSWORD"}
+            or (self.prev in {"THEN", "AND", "COMMA"} and self.seen_dest)
+            or (letter and self.prev == "ACTION")
         )
         if len(meanings) == 1:
             return meanings[0]
@@ -208,7 +239,7 @@ class _Lexer:
             by_kind.setdefault(m.kind, m)
         if "PLACE" in by_kind and len(by_kind["PLACE"].value.name) == 1 and not dest_ctx:
             del by_kind["PLACE"]
-        if self.prev == "ALL" and "KIND" in by_kind:
+        if (self.prev in {"ALL", "ANY", "EXCEPT"} or self.last_word in {"a", "an"}) and "KIND" in by_kind:
             return by_kind["KIND"]
         order = _DEST_ORDER if dest_ctx else _ORDER
         for kind in order:
@@ -229,13 +260,14 @@ class _Lexer:
             item.kind == "UNKNOWN" and self.prev == "PREP"
         ):
             self.seen_dest = True
+        self.last_word = item.text
         if item.kind != "FILLER":
             self.prev = item.kind
 
 
 _ORDER = (
     "ROBOT", "ACTION", "PLACE", "KIND", "CONCEPT", "SPEED", "PREP", "ALL", "THEN", "AND",
-    "NUMBER", "TIMES", "CLASSWORD", "FILLER",
+    "NUMBER", "TIMES", "UNIT", "DIRECTION", "EXCEPT", "ANY", "NOT", "FOREVER", "CLASSWORD", "FILLER",
 )  # fmt: skip
 _DEST_ORDER = ("PLACE", "CONCEPT", "CLASSWORD", "ROBOT", "ACTION", "KIND", "SPEED", *_ORDER[5:])
 
@@ -244,6 +276,7 @@ class _Builder:
     """Fill the slots of one step after another from the items."""
 
     def __init__(self, grammar: Grammar):
+        self.grammar = grammar
         self.lexicon = grammar.lexicon
         self.drafts = [StepDraft()]
         self.prev = "START"
@@ -252,6 +285,12 @@ class _Builder:
         self.corrections: dict[str, str] = {}
         self.stray: list[str] = []
         self.kind_words: list[str] = []
+        self.not_done: list[str] = []
+        self.next_kind = ""
+        self.last_word = ""
+        self.pending: float | None = None  # a number waiting for its unit
+        self.negate: str | None = None  # "do not" said: the next action is not to be done
+        self.excepting = False  # "except" said: the robots that follow are left out
 
     @property
     def cur(self) -> StepDraft:
@@ -263,11 +302,14 @@ class _Builder:
         return self.cur
 
     def run(self, items: list[Item]) -> list[StepDraft]:
-        for item in items:
+        items = _merge_numbers(items)
+        for index, item in enumerate(items):
             if item.corrected_from:
                 self.corrections[item.corrected_from] = item.synonym or _canonical_text(item)
             if item.synonym:
                 self.synonyms[item.synonym] = str(item.value)
+            self.next_kind = next((i.kind for i in items[index + 1 :] if i.kind != "FILLER"), "")
+            self._guard(item)
             getattr(self, f"on_{item.kind.lower()}")(item)
             if item.kind in {"AND", "COMMA"}:
                 self.joined = True
@@ -275,27 +317,86 @@ class _Builder:
                 self.joined = False
             if item.kind != "FILLER":
                 self.prev = item.kind
+            self.last_word = item.text
+        if self.negate:
+            self.stray.append(self.negate)
         return [d for d in self.drafts if not d.empty()]
+
+    def _guard(self, item: Item) -> None:
+        """A "not" applies to the next action only, "except" to the robots right after it; anything else
+        after a "not" is asked about rather than ignored (never "go to A not B" -> both)."""
+        if self.excepting and item.kind not in {"ROBOT", "KIND", "AND", "COMMA", "EXCEPT", "FILLER"}:
+            self.excepting = False
+        if self.negate and item.kind not in {"ACTION", "NOT", "FILLER", "SPEED", "AND"}:
+            self.stray.append(self.negate)
+            self.negate = None
 
     def on_action(self, item: Item) -> None:
         step, spec = self.cur, self.lexicon.actions[item.value]
-        if step.action is None and step.unknown_verb is None:
+        if self.negate:
+            self.negate = None
+            if step.action and spec.category == "task" and step.task_action is None:
+                self.not_done.append(item.text)  # "move to A and do not clean": no clean
+                return
+            step = self.new_step() if step.action or step.unknown_verb else step
+            step.action, step.negated = item.value, True
+            return
+        if step.action is None and step.unknown_verb is None and not (step.dest and self.joined):
             step.action = item.value
         elif spec.category == "task" and step.task_action is None and self._category(step) != "task":
             step.task_action = item.value
         else:
             self.new_step().action = item.value
 
+    def on_not(self, item: Item) -> None:
+        self.negate = item.text
+
+    def on_except(self, item: Item) -> None:
+        self.excepting = True
+
+    def on_any(self, item: Item) -> None:
+        self.cur.any = True
+
+    def on_forever(self, item: Item) -> None:
+        self.cur.forever = True
+
+    def on_direction(self, item: Item) -> None:
+        step = self.cur
+        if step.direction is not None:
+            step = self.new_step()
+        step.direction = item.value
+
+    def on_unit(self, item: Item) -> None:
+        unit, factor = item.value
+        value = self.pending if self.pending is not None else 1.0 if self.last_word in {"a", "an"} else None
+        self.pending = None
+        if value is None:
+            self.stray.append(item.text)
+            return
+        step = self.cur
+        if step.amount is not None:
+            step = self.new_step()
+        step.amount, step.unit = value * factor, unit
+
     def _category(self, step: StepDraft) -> str | None:
         spec = self.lexicon.actions.get(step.action or "")
         return spec.category if spec else None
 
     def on_robot(self, item: Item) -> None:
+        if self.excepting:
+            self.cur.exclude.append(item.value)
+            return
         self._add_robots([item.value])
 
     def on_kind(self, item: Item) -> None:
         word, names, _plural = item.value
         self.kind_words.append(word)
+        if self.excepting:
+            self.cur.exclude.extend(n for n in names if n not in self.cur.exclude)
+            return
+        if self.cur.any or self.last_word in {"a", "an", "any"}:
+            self.cur.any, self.cur.model = True, word  # "a turtlebot": the best one of that kind
+            return
         self.cur.all = False
         self._add_robots(list(names))
 
@@ -331,8 +432,14 @@ class _Builder:
 
     def on_number(self, item: Item) -> None:
         step = self.cur
-        if self.prev == "CLASSWORD" and step.dest is not None and step.dest.kind == "classword":
-            step.dest = Dest("missing_place", f"{step.dest.cls} {fmt(item.value)}", cls=step.dest.cls)
+        if self.next_kind == "UNIT":
+            self.pending = item.value
+        elif self.prev == "UNKNOWN" and step.dest is not None and step.dest.kind == "unknown":
+            step.dest.name = f"{step.dest.name} {item.text}"  # "Roon 3": one name, to ask about as one
+        elif self.prev == "CLASSWORD" and step.dest is not None and step.dest.kind == "classword":
+            step.dest = self._numbered_place(step.dest.cls, item.value)
+        elif step.amount is None and self._unit_of(step) in {"s", "deg"} and item.value > 0:
+            step.amount, step.unit = float(item.value), self._unit_of(step)  # "wait 5", "turn by 45"
         elif (
             step.count is None and self._countable(step) and float(item.value).is_integer() and item.value > 0
         ):
@@ -340,8 +447,27 @@ class _Builder:
         else:
             self.stray.append(item.text)
 
+    def _numbered_place(self, cls: str, number: float) -> Dest:
+        """ "room three" -> the place "Room 3" when the map has it."""
+        name = f"{cls} {fmt(number)}"
+        for meaning in self.grammar.table.get(phrase_key(name), ()):
+            if meaning.kind == "PLACE":
+                place = meaning.value
+                return Dest("place", place.name, float(place.x), float(place.y), place.cls)
+        return Dest("missing_place", name, cls=cls)
+
+    def _unit_of(self, step: StepDraft) -> str | None:
+        spec = ACTIONS.get(self._effective_action(step) or "")
+        return spec.unit if spec else None
+
+    def _effective_action(self, step: StepDraft) -> str | None:
+        """The step's action, or for a continuation ("patrol A and B twice") the one it will inherit."""
+        if step.action or not step.continuation:
+            return step.action
+        return next((d.action for d in reversed(self.drafts[:-1]) if d.action), None)
+
     def _countable(self, step: StepDraft) -> bool:
-        names = (step.task_action, step.action)
+        names = (step.task_action, self._effective_action(step))
         return any(self.lexicon.actions[n].countable for n in names if n in self.lexicon.actions)
 
     def on_unknown(self, item: Item) -> None:
@@ -365,6 +491,34 @@ class _Builder:
     on_and = on_comma = on_filler = on_times = on_prep
 
 
+def _merge_numbers(items: list[Item]) -> list[Item]:
+    """Number words said in parts become one number: "forty five" 45, "one hundred eighty" 180."""
+    out: list[Item] = []
+    for item in items:
+        last = out[-1] if out else None
+        if (
+            item.kind == "NUMBER"
+            and last is not None
+            and last.kind == "NUMBER"
+            and item.text.isalpha()
+            and last.text.replace(" ", "").isalpha()
+            and _joins(float(last.value), float(item.value))
+        ):
+            value = last.value * item.value if item.value == 100 else last.value + item.value
+            out[-1] = Item("NUMBER", value, f"{last.text} {item.text}")
+            continue
+        out.append(item)
+    return out
+
+
+def _joins(first: float, second: float) -> bool:
+    if second == 100:
+        return 1 <= first < 10
+    if first >= 100 and first % 100 == 0:
+        return 1 <= second < 100
+    return first >= 20 and first % 10 == 0 and 1 <= second < 10
+
+
 def _canonical_text(item: Item) -> str:
     value = item.value
     if isinstance(value, Place):
@@ -384,32 +538,53 @@ def interpret(text: str, grammar: Grammar) -> Interpretation:
     items = _Lexer(grammar).run(tokens)
     builder = _Builder(grammar)
     drafts = builder.run(items)
-    return check(drafts, grammar, builder.synonyms, builder.corrections, builder.stray)
+    return check(
+        drafts, grammar, builder.synonyms, builder.corrections, builder.stray, not_done=builder.not_done
+    )
 
 
 # --- semantic checks (the paper's Figure 8) and the answer ------------------------------------------
 
-_EXAMPLE_COORDS = "(2, -1)"
 
-
-def check(drafts, grammar, synonyms, corrections, stray, empty=False, too_long=0) -> Interpretation:
-    """Resolve inherited slots, check every step against the ontology, and type the instruction."""
+def check(
+    drafts, grammar, synonyms, corrections, stray, empty=False, too_long=0, not_done=()
+) -> Interpretation:
+    """Resolve inherited slots and the forms (amounts, loops, subjects), check every step against the ontology,
+    and type the instruction."""
     if empty or too_long:
         return _refusal(grammar, too_long)
-    steps, problems = [], []
+    problems: list[Problem] = []
     previous = None
     for draft in drafts:
         _inherit(draft, previous)
+        previous = draft
+    not_done = [*not_done, *(_describe_draft(d) for d in drafts if d.negated)]
+    measured = []
+    for draft in (d for d in drafts if not d.negated):
+        parts, stray_amount = forms.measure(draft)
+        measured += parts
+        if stray_amount:
+            stray.append(stray_amount)
+    loops = forms.mark_loops(measured)
+    steps = []
+    for draft in measured:
         problems.extend(_check_step(draft, grammar))
         steps.append(_step_dict(draft, grammar))
-        previous = draft
-    problems.extend(_stray_problem(word) for word in stray)
-    if not steps:
-        problems.append(_no_action_problem(None, grammar))
+    steps, why = forms.expand(measured, steps, loops, forms.MAX_STEPS)
+    if why:
+        problems.append(LOOP_PROBLEMS[why](grammar))
+    problems.extend(stray_word(word, grammar) for word in stray)
+    if not steps and not not_done:
+        problems.append(no_action(None, grammar))
     kind = _type_of(problems, synonyms)
     question = " ".join(dict.fromkeys(p.question for p in problems[:3])) or None
-    reason = _reason(kind, steps, synonyms, corrections, problems)
-    return Interpretation(kind, steps, dict(synonyms), reason, question, dict(corrections), problems)
+    why = reason_of(kind, steps, synonyms, corrections, problems, not_done)
+    return Interpretation(kind, steps, dict(synonyms), why, question, dict(corrections), problems, not_done)
+
+
+def _describe_draft(draft: StepDraft) -> str:
+    who = ", ".join(draft.robots) if draft.robots else "the robots"
+    return f"{(draft.action or '').replace('_', ' ')} {who}".strip()
 
 
 def _refusal(grammar, too_long: int) -> Interpretation:
@@ -418,7 +593,7 @@ def _refusal(grammar, too_long: int) -> Interpretation:
         question = "Please split it into shorter instructions, e.g. 'move husky to D then E'."
     else:
         why = "The instruction is empty."
-        question = f"What should the robots do? For example 'move {_example_robot(grammar)} to A'."
+        question = f"What should the robots do? For example 'move {example_robot(grammar)} to A'."
     problem = Problem("V", "empty" if not too_long else "too_long", "", question)
     return Interpretation("V", [], {}, why, question, {}, [problem])
 
@@ -429,8 +604,11 @@ def _inherit(draft: StepDraft, previous: StepDraft | None) -> None:
     if draft.action is None and draft.unknown_verb is None:
         draft.action = previous.action
         draft.unknown_verb = previous.unknown_verb
-    if not draft.robots and not draft.all:
+        draft.inherited_action = True
+        draft.negated = draft.negated or previous.negated
+    if not draft.robots and not draft.all and not draft.any and not draft.exclude:
         draft.robots, draft.all = list(previous.robots), previous.all
+        draft.any, draft.model, draft.exclude = previous.any, previous.model, list(previous.exclude)
     if draft.speed is None:
         draft.speed = previous.speed
 
@@ -449,113 +627,36 @@ def _task(draft: StepDraft, grammar) -> str | None:
 
 def _step_dict(draft: StepDraft, grammar) -> dict:
     spec = ACTIONS.get(draft.action)
-    robots = list(draft.robots) or (ALL if draft.all else spec.unnamed if spec else ANY)
-    return {
+    step = {
         "action": draft.action,
-        "robots": robots,
+        "robots": forms.robots_of(draft, spec.unnamed if spec else ANY),
         "destination": draft.dest.as_dict() if draft.dest else None,
         "task": _task(draft, grammar),
         "speed": draft.speed,
     }
+    if spec is not None and spec.unit in forms.MEASURED_UNITS and draft.amount is not None:
+        step["amount"] = round(draft.amount, 3)
+    return step
 
 
 def _check_step(draft: StepDraft, grammar) -> list[Problem]:
     """Return what keeps this step from running: unknown words first, then semantic issues."""
     problems = []
     if draft.unknown_verb:
-        problems.append(_unknown_verb_problem(draft.unknown_verb, grammar))
+        problems.append(unknown_verb(draft.unknown_verb, grammar))
     elif draft.action is None:
-        problems.append(_no_action_problem(draft, grammar))
+        problems.append(no_action(draft, grammar))
     dest, spec = draft.dest, grammar.lexicon.actions.get(draft.action or "")
-    if dest is not None and dest.kind in _DEST_CHECKS:
-        problem = _DEST_CHECKS[dest.kind](dest, spec, draft, grammar)
+    if dest is not None and dest.kind in DEST_CHECKS:
+        problem = DEST_CHECKS[dest.kind](dest, spec, draft, grammar)
         if problem:
             problems.append(problem)
     elif dest is None and spec is not None and spec.requires_destination:
-        problems.append(_missing_dest_problem(draft, spec, grammar))
+        problems.append(missing_destination(draft, spec, grammar))
+    unit = getattr(ACTIONS.get(draft.action or ""), "unit", None)
+    if unit in forms.MEASURED_UNITS and draft.amount is None:
+        problems.append(missing_amount(draft, unit, grammar))
     return problems
-
-
-def _check_place(dest: Dest, spec, draft, grammar) -> Problem | None:
-    if spec is None:
-        return None
-    if not spec.takes_destination:
-        q = f"'{spec.name}' does not take a destination. Did you mean 'move ... to {dest.name}'?"
-        return Problem("III", "no_destination_expected", dest.name, q)
-    if dest.cls not in spec.accepts:
-        return _not_accepted(dest, spec, grammar)
-    return None
-
-
-def _check_concept(dest: Dest, spec, draft, grammar) -> Problem | None:
-    if spec is not None and (dest.cls not in spec.accepts or not spec.takes_destination):
-        return _not_accepted(dest, spec, grammar)
-    q = f"Where is '{dest.name}' on the map? Answer '{dest.name} is a location at (x, y)'."
-    return Problem("V", "unlocated", dest.name, q)
-
-
-def _not_accepted(dest: Dest, spec, grammar) -> Problem:
-    what = grammar.lexicon.class_descriptions.get(dest.cls or "", "not a place on the map")
-    q = (
-        f"'{dest.name}' is {what} — not a place on the map, so robots cannot {spec.name} there. "
-        f"Choose a location ({_place_names(grammar)}) or coordinates like {_EXAMPLE_COORDS}."
-    )
-    return Problem("III", "invalid_destination", dest.name, q)
-
-
-def _check_unknown(dest: Dest, spec, draft, grammar) -> Problem:
-    w = dest.name
-    q = (
-        f"I don't know '{w}'. If it is another word for a place, answer '{w} means A'; if it is a place "
-        f"on the map, answer '{w} is a location at (x, y)'; if robots cannot go there, answer "
-        f"'{w} is not a place'."
-    )
-    return Problem("V", "unknown_destination", w, q)
-
-
-def _check_missing_place(dest: Dest, spec, draft, grammar) -> Problem:
-    q = f"There is no {dest.name} on the map. Known places: {_place_names(grammar)}."
-    return Problem("V", "no_such_place", dest.name, q)
-
-
-def _check_classword(dest: Dest, spec, draft, grammar) -> Problem:
-    q = f"Which {dest.name}? Known places: {_place_names(grammar)}."
-    return Problem("III", "which_place", dest.name, q)
-
-
-_DEST_CHECKS = {
-    "place": _check_place,
-    "concept": _check_concept,
-    "unknown": _check_unknown,
-    "missing_place": _check_missing_place,
-    "classword": _check_classword,
-}
-
-
-def _missing_dest_problem(draft: StepDraft, spec, grammar) -> Problem:
-    who = ", ".join(draft.robots) if draft.robots else "the robots"
-    q = (
-        f"Where should {who} {spec.name}? Name a location ({_place_names(grammar)}) "
-        f"or coordinates like {_EXAMPLE_COORDS}."
-    )
-    return Problem("III", "missing_destination", spec.name, q)
-
-
-def _unknown_verb_problem(word: str, grammar) -> Problem:
-    known = ", ".join(sorted(grammar.lexicon.actions))
-    q = f"I don't know the action '{word}'. Which action do you mean? Answer e.g. '{word} means move' (I know: {known})."
-    return Problem("V", "unknown_action", word, q)
-
-
-def _no_action_problem(draft: StepDraft | None, grammar) -> Problem:
-    known = ", ".join(sorted(grammar.lexicon.actions))
-    q = f"What should the robots do? Start with an action, e.g. 'move {_example_robot(grammar)} to A' (I know: {known})."
-    return Problem("V", "no_action", "", q)
-
-
-def _stray_problem(word: str) -> Problem:
-    q = f"I don't know what '{word}' means here. Rephrase without it, or teach me: '{word} means <a word I know>'."
-    return Problem("V", "unknown_word", word, q)
 
 
 def _type_of(problems: list[Problem], synonyms: dict) -> str:
@@ -565,58 +666,3 @@ def _type_of(problems: list[Problem], synonyms: dict) -> str:
     if "III" in levels:
         return "IV" if synonyms else "III"
     return "II" if synonyms else "I"
-
-
-def _reason(kind: str, steps: list[dict], synonyms, corrections, problems) -> str:
-    parts = [f"Type {kind}."]
-    if synonyms:
-        parts.append(
-            ", ".join(f"'{w}' is a synonym of '{c}'" for w, c in synonyms.items()) + " (owl:sameAs)."
-        )
-    if corrections:
-        parts.append("Read " + ", ".join(f"'{t}' as '{w}'" for t, w in corrections.items()) + ".")
-    if problems:
-        parts.append(" ".join(dict.fromkeys(_PROBLEM_WORDS[p.code].format(w=p.word) for p in problems)))
-    else:
-        parts.append("Understood: " + "; then ".join(_describe(s) for s in steps) + ".")
-    return " ".join(parts)
-
-
-_PROBLEM_WORDS = {
-    "unknown_action": "'{w}' is not an action I know.",
-    "no_action": "No action was given.",
-    "unknown_destination": "'{w}' is not a concept I know.",
-    "unknown_word": "'{w}' is not a word I know here.",
-    "invalid_destination": "'{w}' is a known concept but not a valid destination (owl:allValuesFrom).",
-    "no_destination_expected": "the action does not take a destination ('{w}').",
-    "missing_destination": "'{w}' needs a destination.",
-    "which_place": "'{w}' names a kind of place, not one place.",
-    "no_such_place": "there is no {w} on the map.",
-    "unlocated": "'{w}' has no position on the map.",
-    "empty": "The instruction is empty.",
-    "too_long": "The instruction is too long.",
-}
-
-
-def _describe(step: dict) -> str:
-    robots = step["robots"] if isinstance(step["robots"], str) else ", ".join(step["robots"])
-    text = f"{step['action']} {robots}"
-    if step["destination"]:
-        text += f" to {step['destination']['name']}"
-    if step["task"]:
-        text += f" and {step['task']}"
-    if step["speed"]:
-        text += f" ({step['speed']})"
-    return text
-
-
-def _place_names(grammar, limit: int = 12) -> str:
-    names = [p.name for p in grammar.fleet.places]
-    if not names:
-        return "none registered yet"
-    shown = ", ".join(names[:limit])
-    return shown + (", ..." if len(names) > limit else "")
-
-
-def _example_robot(grammar) -> str:
-    return grammar.fleet.robots[0].name if grammar.fleet.robots else "husky"

@@ -98,13 +98,15 @@ def warm_up() -> None:
 
 def teach(answer_text: str, user=None, instruction=None) -> dict:
     """Learn from a person's answer; store the lesson (who, when) and audit it."""
+    asked = _asked(instruction)
     try:
-        answer = parse_answer(answer_text)
+        answer = _bare_answer(answer_text, asked) or parse_answer(answer_text)
         with transaction.atomic():
             meaning = _TEACHERS[answer.kind](answer, store().get_grammar())
             lesson = _record_lesson(answer_text, answer, meaning, user, instruction)
     except ValueError as exc:
-        return {"ok": False, "message": str(exc), "examples": list(EXAMPLES)}
+        examples = _examples_about(asked) or list(EXAMPLES)
+        return {"ok": False, "message": f"{exc} Try e.g. '{examples[0]}'.", "examples": examples}
     result = {
         "ok": True,
         "kind": answer.kind,
@@ -117,6 +119,52 @@ def teach(answer_text: str, user=None, instruction=None) -> dict:
     if lesson.instruction is not None:
         result["instruction"] = interpret(lesson.instruction.text)
     return result
+
+
+def _asked(instruction):
+    """What the question of this instruction asked about (the parser's first problem with a word), or None."""
+    from interpreter.models import Lesson
+
+    pk = getattr(instruction, "pk", instruction)
+    if pk is None:
+        return None
+    instructions = Lesson._meta.get_field("instruction").related_model  # by the foreign key: no upward import
+    text = instructions.objects.filter(pk=pk).values_list("text", flat=True).first()
+    if text is None:
+        return None
+    return next((p for p in parse(text, store().get_grammar()).problems if p.word), None)
+
+
+def _bare_answer(text: str, asked) -> Answer | None:
+    """A bare word answering a question about a word ("move", asked what 'zoom' is) means "zoom means move"."""
+    words = " ".join((text or "").strip(" .!?'\"").split())
+    if asked is None or asked.code not in _BARE or not words or len(words.split()) > 3:
+        return None
+    if not words.replace(" ", "").isalpha():
+        return None
+    try:
+        parse_answer(words)
+    except ValueError:
+        return Answer("synonym", asked.word, words.casefold())
+    return None  # a full answer ("zoom means move") parses as it is
+
+
+_BARE = {"unknown_action", "unknown_destination", "unknown_word", "no_such_place"}
+
+
+def _examples_about(asked) -> list[str]:
+    """Answers that fit what was asked: about the word asked, in the forms that question takes."""
+    if asked is None:
+        return []
+    w = asked.word
+    forms = {
+        "unknown_action": [f"{w} means move", f"{w} is a synonym of navigate"],
+        "unknown_destination": [f"{w} means A", f"{w} is a location at (3, 4)", f"{w} is not a place"],
+        "no_such_place": [f"{w} means A", f"{w} is a location at (3, 4)"],
+        "unlocated": [f"{w} is a location at (3, 4)"],
+        "unknown_word": [f"{w} means move", f"{w} is not a place"],
+    }.get(asked.code, [])
+    return list(dict.fromkeys([e for e in (asked.example, *forms) if e]))
 
 
 _TAUGHT_WORDS = {

@@ -4,7 +4,7 @@ Groups: "fleet" (every dashboard), "robot.<pk>" (a robot's page) and "alerts" (e
 and forward; the handler name in the consumer matches the payload's "type".
 """
 
-from typing import TypedDict
+from typing import NotRequired, TypedDict
 
 from asgiref.sync import async_to_sync
 from channels.layers import get_channel_layer
@@ -126,6 +126,8 @@ class RobotPose(TypedDict):
     v: float  # linear speed, m/s
     w: float  # angular speed, rad/s
     t: float  # unix time of the odometry message
+    battery: NotRequired[float]  # percent, from the robot's bound sensor_msgs/BatteryState, when it has one
+    rtt: NotRequired[float]  # ms, the round trip of a ping on the link to the robot's endpoint
 
 
 class PoseBatch(TypedDict):
@@ -156,6 +158,44 @@ class RobotPath(TypedDict):
     robot: str
     path: list[list[float]] | None  # the route it has reserved, [[x, y], ...]; None: unchanged; []: none
     waiting_for: str | None  # the robot it waits for to make way, if any
+
+
+class RobotScan(TypedDict):
+    type: str  # "robot.scan"
+    id: int
+    topic: str
+    scan: dict  # angle_min, angle_increment, range_min, range_max, ranges (m, rounded; null: no return)
+
+
+class RobotCamera(TypedDict):
+    type: str  # "robot.camera"
+    id: int
+    topic: str
+    format: str  # sensor_msgs/CompressedImage's format: "jpeg", "png" (maybe with the encoding before it)
+    data: str  # the image, base64 (as rosbridge sends uint8[])
+
+
+def scan(robot_id: int, topic: str, message: dict) -> RobotScan:
+    """One laser scan for a robot's page or a map's selected robot (sent by portal.feeds, on its socket)."""
+    ranges = [round(r, 3) if isinstance(r, int | float) else None for r in message.get("ranges") or []]
+    fields = ("angle_min", "angle_increment", "range_min", "range_max")
+    return RobotScan(
+        type="robot.scan",
+        id=robot_id,
+        topic=topic,
+        scan={**{k: message.get(k) for k in fields}, "ranges": ranges},
+    )
+
+
+def camera(robot_id: int, topic: str, message: dict) -> RobotCamera:
+    """One camera frame for a robot's page (sent by portal.feeds, on its socket)."""
+    return RobotCamera(
+        type="robot.camera",
+        id=robot_id,
+        topic=topic,
+        format=str(message.get("format", "")),
+        data=message.get("data", ""),
+    )
 
 
 class RegistrationProgress(TypedDict, total=False):

@@ -1,5 +1,6 @@
 """Locations, schedules and instructions in the JSON API."""
 
+import math
 from datetime import time
 
 from ninja import Query, Router, Schema
@@ -59,6 +60,7 @@ class Destination(Schema):
     location: Id | None = None
     x: float | None = Field(None, allow_inf_nan=False, ge=-1e6, le=1e6)
     y: float | None = Field(None, allow_inf_nan=False, ge=-1e6, le=1e6)
+    yaw: float | None = Field(None, allow_inf_nan=False, ge=-7, le=7, description="heading to end with, rad")
 
     @model_validator(mode="after")
     def one_place(self):
@@ -189,6 +191,9 @@ def _move_by_ids(robot_ids: list[int], destination: Destination) -> tuple[str, d
     else:
         goal = {"name": "", "x": destination.x, "y": destination.y}
         where = f"({destination.x:g}, {destination.y:g})"
+    if destination.yaw is not None:
+        goal["yaw"] = destination.yaw
+        where += f" facing {math.degrees(destination.yaw):.0f}°"
     names = [robot.name for robot in robots]
     step = {"action": "move", "robots": names, "destination": goal, "task": None, "speed": None}
     text = f"move robots {', '.join(map(str, robot_ids))} to {where}"

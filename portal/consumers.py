@@ -21,7 +21,8 @@ from access.roles import may, refusal
 from execution import fast_stop
 from execution.held_teleop import HeldTeleop
 from interpreter.service import warm_up
-from portal import snapshots, socket_input
+from portal import feeds, snapshots, socket_input
+from portal.fanout import PoseFanout
 from portal.schemas import InstructionOut
 from portal.socket_input import BadFrame
 
@@ -144,7 +145,15 @@ def command_instruct(user, content: dict) -> tuple[str, dict]:
             question = Instruction.objects.get(pk=socket_input.robot_id(answer_to), status="needs_user")
         except (BadFrame, Instruction.DoesNotExist):
             raise CommandError("answer_to: no question waits for an answer with that id") from None
-    instruction = _call(submit, text, user, "console", None, question)
+    # The robots selected on the page: a text that names none goes to them.
+    selected = content.get("robot_ids")
+    try:
+        selected = socket_input.robot_ids(selected) if selected else None
+    except BadFrame as exc:
+        raise CommandError(f"robot_ids: {exc}") from None
+    if selected == "all":
+        raise CommandError("robot_ids: a list of robot ids")
+    instruction = _call(submit, text, user, "console", None, question, selected)
     return f"#{instruction.pk} {instruction.status}", {"instruction": InstructionOut.of(instruction)}
 
 
@@ -239,6 +248,12 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         for group in self.joined:
             await self.channel_layer.group_add(group, self.channel_name)
         await self.send_json(snapshot)
+        self.poses = PoseFanout.of(self.channel_layer)  # the ticks of poses after the snapshot, from the
+        await self.poses.subscribe(self, self.poses_of())  # process's one reader (portal.fanout)
+
+    def poses_of(self) -> int | None:
+        """The robot whose poses this page shows; None for all."""
+        return None
 
     @staticmethod
     def granted(user) -> dict[str, bool]:
@@ -257,6 +272,10 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
     async def disconnect(self, code):
         if getattr(self, "teleop", None) is not None:
             self.teleop.close()
+        if getattr(self, "feeds", None) is not None:
+            await self.feeds.close()
+        if getattr(self, "poses", None) is not None:
+            await self.poses.unsubscribe(self)
         for group in getattr(self, "joined", ()):
             await self.channel_layer.group_discard(group, self.channel_name)
 
@@ -285,6 +304,9 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
 
     async def receive_json(self, content, **kwargs):
         user = self.scope["user"]
+        if content.get("command") == "watch":
+            await self.watch(content)
+            return
         if content.get("command") == "teleop" and self.abilities["control"]:
             await self.take_teleop(user, content)
             return
@@ -310,6 +332,18 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         names = await database_sync_to_async(stop_names, thread_sensitive=False)(text)
         if names is not None:
             await fast_stop.stop_now(fast_stop.TARGETS.ids(names))
+
+    async def watch(self, content) -> None:
+        """Follow one robot's scan on this page's map ({"command": "watch", "robot": id or null})."""
+        robot = content.get("robot")
+        try:
+            robot_id = None if robot is None else socket_input.robot_id(robot)
+        except BadFrame as exc:
+            await self.refuse(content, str(exc))
+            return
+        if getattr(self, "feeds", None) is None:
+            self.feeds = feeds.Feeds(self.send_json)
+        await self.feeds.watch(robot_id, ("scan",))
 
     async def take_teleop(self, user, content) -> None:
         """Held buttons: checked once per press, repeats published from this loop (execution.held_teleop)."""
@@ -346,20 +380,20 @@ class FleetConsumer(_PageConsumer):
     """/ws/fleet/: every robot, every instruction, all poses."""
 
     def group_names(self):
-        return [live.FLEET_GROUP, live.POSES_GROUP]
+        return [live.FLEET_GROUP]
 
     def snapshot(self):
         return snapshots.fleet_snapshot()
-
-    async def fleet_poses(self, event):
-        await self.send_json(event)
 
 
 class RobotConsumer(_PageConsumer):
     """/ws/robots/<id>/: one robot's status, transitions, lease, goal and pose."""
 
     def group_names(self):
-        return [live.robot_group(self.robot_id), live.POSES_GROUP]
+        return [live.robot_group(self.robot_id)]
+
+    def poses_of(self) -> int | None:
+        return self.robot_id
 
     def snapshot(self):
         from robots.models import Robot
@@ -370,10 +404,16 @@ class RobotConsumer(_PageConsumer):
         robot = Robot.objects.filter(pk=self.robot_id).first()
         return snapshots.robot_snapshot(robot) if robot else None
 
-    async def fleet_poses(self, event):
-        mine = [pose for pose in event["poses"] if pose["id"] == self.robot_id]
-        if mine:
-            await self.send_json({"type": "fleet.poses", "poses": mine})
+    async def connect(self):
+        await super().connect()
+        if getattr(
+            self, "joined", None
+        ):  # accepted: its robot's scan and camera follow while the page is open
+            self.feeds = feeds.Feeds(self.send_json)
+            try:
+                await self.feeds.watch(self.robot_id)
+            except Exception:  # a feed that cannot start costs its panel, never the page's socket
+                log.exception("robot %s: sensor feeds not started", self.robot_id)
 
 
 class AlertsConsumer(AsyncJsonWebsocketConsumer):

@@ -18,11 +18,13 @@ def _robot_row(robot, holders: dict, current: dict, goals: dict, cached: dict) -
         "drive": robot.drive,
         "state": robot.state,
         "link_status": robot.link_status,
+        "last_seen": robot.last_seen.isoformat() if robot.last_seen else None,
         "footprint": robot.footprint,
         "max_linear": robot.max_linear,
         "max_angular": robot.max_angular,
         "start_pose": robot.start_pose,
-        "holder": holders.get(robot.pk),
+        "holder": holders.get(robot.pk, (None, None))[0],
+        "held_until": holders.get(robot.pk, (None, None))[1],
         "instruction": current.get(robot.pk),
         "goal": goals.get(robot.pk),
         "pose": cached.get(live.POSE_CACHE_KEY.format(id=robot.pk)),
@@ -33,17 +35,43 @@ def robot_rows(robots) -> list[dict]:
     """The robots with their holders, current instructions, goals and last poses, in few queries."""
     robots = list(robots)
     ids = [robot.pk for robot in robots]
-    holders = dict(
-        ControlLease.objects.filter(robot_id__in=ids, expires_at__gt=timezone.now()).values_list(
-            "robot_id", "user__username"
-        )
+    leases = ControlLease.objects.filter(robot_id__in=ids, expires_at__gt=timezone.now()).values_list(
+        "robot_id", "user__username", "expires_at"
     )
+    holders = {pk: (name, until.isoformat()) for pk, name, until in leases}
     current, goals = Execution.objects.current_work(ids)
     try:
         cached = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in ids])
     except Exception:  # a missing cache only costs the first tick of poses
         cached = {}
-    return [_robot_row(robot, holders, current, goals, cached) for robot in robots]
+    rows = [_robot_row(robot, holders, current, goals, cached) for robot in robots]
+    _add_routes(rows, {robot.pk: robot.name for robot in robots})
+    return rows
+
+
+def _add_routes(rows: list[dict], names: dict) -> None:
+    """Each robot's reserved route (what is left of it) and whom it waits for, as the map draws them."""
+    from execution import traffic
+
+    try:
+        found = traffic.routes(names)
+    except Exception:  # Redis away: the next live.path says it
+        return
+    blockers = {entry["waiting_for"] for entry in found.values()} - set(names) - {None}
+    names = {**names, **dict(Robot.objects.filter(pk__in=blockers).values_list("pk", "name"))}
+    for row in rows:
+        entry = found.get(row["id"])
+        if entry is None:
+            continue
+        path, pose = entry["path"], row["pose"]
+        if pose and path:  # drop what is behind the robot: from the point nearest to it on
+            nearest = min(
+                range(len(path)), key=lambda i: (path[i][0] - pose["x"]) ** 2 + (path[i][1] - pose["y"]) ** 2
+            )
+            path = path[nearest:]
+        blocker = entry["waiting_for"]
+        row["route"] = path
+        row["waiting_for"] = names.get(blocker) or (f"#{blocker}" if blocker is not None else None)
 
 
 def _instruction_row(instruction) -> dict:

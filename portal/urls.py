@@ -2,7 +2,7 @@
 
 from django.urls import path
 
-from portal import views, views_experiments
+from portal import views, views_experiments, views_recordings
 
 urlpatterns = [
     path("", views.dashboard, name="dashboard"),
@@ -17,5 +17,34 @@ urlpatterns = [
     path("audit/", views.audit, name="audit"),
     path("alerts/", views.alerts, name="alerts"),
     path("experiments/", views_experiments.experiments, name="experiments"),
+    path("experiments/status/", views_experiments.runs_status, name="experiment-status"),
+    path(
+        "experiments/tables.csv",
+        views_experiments.tables_export,
+        {"fmt": "csv"},
+        name="experiment-tables-csv",
+    ),
+    path(
+        "experiments/tables.json",
+        views_experiments.tables_export,
+        {"fmt": "json"},
+        name="experiment-tables-json",
+    ),
+    path(
+        "experiments/runs/<int:pk>.csv",
+        views_experiments.run_export,
+        {"fmt": "csv"},
+        name="experiment-run-csv",
+    ),
+    path(
+        "experiments/runs/<int:pk>.json",
+        views_experiments.run_export,
+        {"fmt": "json"},
+        name="experiment-run-json",
+    ),
+    path("recordings/", views_recordings.recordings, name="recordings"),
+    path("recordings/<int:pk>/", views_recordings.replay, name="recording-replay"),
+    path("recordings/<int:pk>/frames.json", views_recordings.frames, name="recording-frames"),
+    path("recordings/<int:pk>/recording.mcap", views_recordings.download, name="recording-download"),
     path("control/stop/", views.stop, name="stop"),
 ]

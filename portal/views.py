@@ -6,6 +6,7 @@ small POST views at the end of this module, which answer JSON to fetch() and red
 
 import json
 
+from django.conf import settings
 from django.contrib import messages
 from django.core.paginator import Paginator
 from django.http import Http404, JsonResponse
@@ -20,9 +21,9 @@ from places.models import Location, Map
 from portal import snapshots
 from portal.api_types import MAX_ID, ids_from_text
 from portal.consumers import run_command
+from robots import sensors
 from robots.models import Binding, RegistrationRecord, Robot
 
-DEMO_ENDPOINTS = ["ws://127.0.0.1:9090", "ws://127.0.0.1:9091", "ws://127.0.0.1:9092", "ws://127.0.0.1:9093"]
 TIMING_FIELDS = [
     ("interpreted_at", "interpreted"),
     ("dispatched_at", "dispatched"),
@@ -103,6 +104,33 @@ def robot_list(request):
 GRAPH_PAGE = 100  # topics, nodes or services per page of a robot's page
 
 
+# Facts the page shows elsewhere (drive, wheels, legs in "Drive"; the footprint on the map) or only when set.
+_FACTS_SHOWN_ELSEWHERE = {"drive", "wheel_count", "leg_count", "footprint"}
+_FACT_LABELS = {"urdf_error": "URDF problem", "name": "URDF name", "joint_count": "Joints"}
+
+
+def _fact_text(value) -> str:
+    """A fact as a person reads it: lists joined, numbers rounded, never Python's repr."""
+    if isinstance(value, list | tuple):
+        return ", ".join(_fact_text(item) for item in value)
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, dict):
+        return ", ".join(f"{key} {_fact_text(item)}" for key, item in value.items())
+    return str(value)
+
+
+def _facts(robot) -> list[tuple[str, str]]:
+    """The URDF and registration facts of a robot's description worth reading, labelled in words."""
+    facts = []
+    for key, value in sorted((robot.description or {}).items()):
+        if key in _FACTS_SHOWN_ELSEWHERE or value in (None, "", [], {}, 0):
+            continue
+        label = _FACT_LABELS.get(key, key.replace("_", " ").capitalize())
+        facts.append((label, _fact_text(value)))
+    return facts
+
+
 @requires("view")
 def robot_detail(request, pk: int):
     """One robot: bindings and how each was found, its ROS graph, URDF facts, history, teleop and lease."""
@@ -116,7 +144,9 @@ def robot_detail(request, pk: int):
         "topics": Paginator(robot.topics.all(), GRAPH_PAGE).get_page(request.GET.get("topics")),
         "nodes": Paginator(robot.nodes.all(), GRAPH_PAGE).get_page(request.GET.get("nodes")),
         "services": Paginator(robot.services.all(), GRAPH_PAGE).get_page(request.GET.get("services")),
-        "facts": sorted((robot.description or {}).items()),
+        "facts": _facts(robot),
+        "feeds": sensors.feeds(robot),
+        "map_data": _map_context(),
         "transitions": robot.transitions.select_related("instruction")[:30],
         "holds_it": row["holder"] == request.user.username,
     }
@@ -129,10 +159,21 @@ def registration(request):
     context = {
         "records": RegistrationRecord.objects.select_related("user")[:20],
         "pending": Binding.objects.filter(needs_user=True).select_related("robot"),
-        "demo_endpoints": "\n".join(DEMO_ENDPOINTS),
+        "demo_endpoints": "\n".join(_simulated_endpoints()),
         "robots": Robot.objects.all(),
     }
     return render(request, "fleet/registration.html", context)
+
+
+def _simulated_endpoints() -> list[str]:
+    """Every endpoint of the simulated world that carries robots, as `make run` serves it (the prefill)."""
+    from fleetcore.world import WorldFormatError, load_world
+
+    try:
+        world = load_world(settings.FLEET_WORLD)
+    except (OSError, WorldFormatError):
+        return []
+    return world.robot_endpoint_urls("127.0.0.1", settings.FLEET_SIM_PORT_BASE)
 
 
 @requires(POST="edit_bindings")
@@ -168,7 +209,12 @@ def schedules(request):
         {"robot": robot, "cells": [(start, end, cells.get((robot.pk, start, end))) for start, end in columns]}
         for robot in Robot.objects.all()
     ]
-    context = {"columns": columns, "rows": rows, "goals": Location.objects.all()}
+    context = {
+        "columns": columns,
+        "rows": rows,
+        "goals": Location.objects.all(),
+        "any_off": any(not slot.enabled for slot in slots),
+    }
     return render(request, "fleet/schedules.html", context)
 
 

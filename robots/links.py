@@ -28,7 +28,6 @@ import asyncio
 import contextlib
 import logging
 import math
-import time
 from collections.abc import Awaitable, Callable, Iterable
 
 from asgiref.sync import sync_to_async
@@ -38,8 +37,8 @@ from django.utils import timezone
 
 import alerts
 import live
-from fleetcore import motion
 from fleetcore.states import Event
+from robots.commands import CommandSurface, surfaces
 from robots.models import Robot
 from robots.rosbridge import RosbridgeClient
 
@@ -74,20 +73,12 @@ def owe_zero(robot_ids) -> None:
     cache.set_many({ZERO_OWED_KEY.format(id=pk): True for pk in robot_ids}, timeout=ZERO_OWED_S)
 
 
-def zeros_owed(url: str) -> list[dict]:
-    """The robots behind url owed a zero, with what it takes to send one: [{id, name, target, type, ros}]."""
+def zeros_owed(url: str) -> list[CommandSurface]:
+    """The command surfaces of the robots behind url that are owed a zero."""
     close_old_connections()
-    robots = {r.pk: r for r in Robot.objects.filter(endpoint=url).prefetch_related("bindings")}
-    owed = cache.get_many([ZERO_OWED_KEY.format(id=pk) for pk in robots])
-    out = []
-    for pk, robot in robots.items():
-        move = next((b for b in robot.bindings.all() if b.action == "move" and b.target), None)
-        if ZERO_OWED_KEY.format(id=pk) in owed and move is not None:
-            out.append(
-                {"id": pk, "name": robot.name, "target": move.target, "type": move.message_type,
-                 "ros": robot.ros_version}
-            )  # fmt: skip
-    return out
+    found = surfaces(Robot.objects.filter(endpoint=url).prefetch_related("bindings"))
+    owed = cache.get_many([ZERO_OWED_KEY.format(id=pk) for pk in found])
+    return [s for pk, s in found.items() if ZERO_OWED_KEY.format(id=pk) in owed and s.can_move]
 
 
 def paid_zero(robot_ids) -> None:
@@ -123,16 +114,16 @@ async def pay_zeros(client: RosbridgeClient, url: str) -> list[str]:
     """Send every robot behind url that is owed a zero its zero velocity, on the link just back up."""
     owed = await sync_to_async(zeros_owed)(url)
     for robot in owed:
-        message = motion.velocity_message(0.0, 0.0, robot["type"], robot["ros"], time.time())
         try:
-            await client.publish(robot["target"], message, robot["type"] or "geometry_msgs/Twist")
+            for topic, message, type_ in robot.zero():
+                await client.publish(topic, message, type_)
         except Exception as exc:  # down again: still owed, paid on the next reconnection
-            log.warning("%s: zero for %s not sent: %s", url, robot["name"], exc)
+            log.warning("%s: zero for %s not sent: %s", url, robot.name, exc)
             return []
-    await sync_to_async(paid_zero)([robot["id"] for robot in owed])
+    await sync_to_async(paid_zero)([robot.robot_id for robot in owed])
     if owed:
-        log.info("%s: link back, zero velocity sent to %s", url, ", ".join(r["name"] for r in owed))
-    return [robot["name"] for robot in owed]
+        log.info("%s: link back, zero velocity sent to %s", url, ", ".join(r.name for r in owed))
+    return [robot.name for robot in owed]
 
 
 def follow_link_in_state_machine(url: str, up: bool) -> None:
@@ -235,15 +226,25 @@ _BATTERY_CHECKS: set[asyncio.Task] = set()  # running checks, kept until done
 
 
 async def battery_hook(client: RosbridgeClient, robots: list[dict]) -> None:
-    """A LinkManager hook: follow each robot's bound battery (sensor_msgs/BatteryState), every 10 s at most."""
+    """A LinkManager hook: follow each robot's bound battery (sensor_msgs/BatteryState), every 10 s at most.
+
+    The charge is classed on the loop ("low", "ok" or neither); the database is reached only when a robot's class
+    changes (the first message of each robot counts as a change, so an alert left open from before is resolved).
+    With 1,000 robots a check per message was 100 transactions a second through Django's one shared sync
+    thread, where the pose hub's writes queued behind them: the live push all but stopped."""
     loop = asyncio.get_running_loop()
+    last: dict[int, str] = {}
     for robot in robots:
         if "battery" not in robot["bindings"]:
             continue
         topic, type_ = robot["bindings"]["battery"]
 
         def on_battery(message: dict, robot_id=robot["id"]) -> None:
-            task = loop.create_task(sync_to_async(check_battery)(robot_id, message))
+            level = battery_level(message)
+            if level is None or last.get(robot_id) == level:
+                return
+            last[robot_id] = level
+            task = loop.create_task(sync_to_async(check_battery, thread_sensitive=False)(robot_id, message))
             _BATTERY_CHECKS.add(task)
             task.add_done_callback(_BATTERY_CHECKS.discard)
 
@@ -252,23 +253,37 @@ async def battery_hook(client: RosbridgeClient, robots: list[dict]) -> None:
         )
 
 
-def check_battery(robot_id: int, message: dict) -> str | None:
-    """Raise low_battery under LOW_BATTERY, resolve it over BATTERY_OK; return "low", "ok" or None."""
+def battery_charge(message: dict) -> float | None:
+    """The charge as a fraction of 1, or None when unknown (NaN is "not measured" in BatteryState)."""
     charge = message.get("percentage") if isinstance(message, dict) else None
     if isinstance(charge, bool) or not isinstance(charge, int | float) or not math.isfinite(charge):
-        return None  # unknown charge (NaN is "not measured" in BatteryState)
-    charge = charge / 100 if charge > 1 else charge  # some drivers publish percent, not a fraction
+        return None
+    return charge / 100 if charge > 1 else charge  # some drivers publish percent, not a fraction
+
+
+def battery_level(message: dict) -> str | None:
+    """ "low" under LOW_BATTERY, "ok" over BATTERY_OK, None between them or when the charge is unknown."""
+    charge = battery_charge(message)
+    if charge is None:
+        return None
+    return "low" if charge < LOW_BATTERY else "ok" if charge > BATTERY_OK else None
+
+
+def check_battery(robot_id: int, message: dict) -> str | None:
+    """Raise low_battery under LOW_BATTERY, resolve it over BATTERY_OK; return "low", "ok" or None."""
+    level = battery_level(message)
+    if level is None:
+        return None
+    charge = battery_charge(message)
     close_old_connections()
     robot = Robot.objects.filter(pk=robot_id).first()
     if robot is None:
         return None
-    if charge < LOW_BATTERY:
+    if level == "low":
         alerts.raise_alert("low_battery", robot, f"{robot.name}: battery at {charge:.0%}")
-        return "low"
-    if charge > BATTERY_OK:
+    else:
         alerts.resolve_alert("low_battery", robot, f"battery at {charge:.0%}")
-        return "ok"
-    return None
+    return level
 
 
 async def wait_for_endpoints(

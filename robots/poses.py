@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import threading
 import time
 from collections import defaultdict
@@ -35,6 +36,8 @@ from fleetcore.geometry import Pose2D, compose, inverse, pose_of, start_offset, 
 log = logging.getLogger(__name__)
 
 DEFAULT_RATE_HZ = 10.0
+BATTERY_EVERY_MS = 1000  # rosbridge throttle of a battery subscription for the pages (charge moves slowly)
+ROUND_TRIP_EVERY_S = 2.0  # a ping on each endpoint's link this often
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,9 @@ async def publish_to_channels(batch: list[live.RobotPose]) -> None:
     layer = get_channel_layer()
     if layer is not None:
         await layer.group_send(live.POSES_GROUP, live.poses(batch))
-    await sync_to_async(store_poses)(batch)
+    await sync_to_async(store_poses, thread_sensitive=False)(
+        batch
+    )  # not behind Django's one shared sync thread
 
 
 class PoseHub:
@@ -99,6 +104,7 @@ class PoseHub:
         self._offsets: dict[int, Pose2D] = {}
         self._raw_odometry: dict[int, Pose2D] = {}
         self._latest: dict[int, live.RobotPose] = {}
+        self._extras: dict[int, dict] = defaultdict(dict)  # battery (percent), rtt (ms): carried in each pose
         self._dirty: set[int] = set()
 
     def track(self, robot_id: int, start_pose=None) -> None:
@@ -108,7 +114,7 @@ class PoseHub:
 
     def forget(self, robot_id: int) -> None:
         with self._lock:
-            for table in (self._offsets, self._raw_odometry, self._latest):
+            for table in (self._offsets, self._raw_odometry, self._latest, self._extras):
                 table.pop(robot_id, None)
             self._dirty.discard(robot_id)
 
@@ -126,6 +132,12 @@ class PoseHub:
             pose = bindings["pose"]
             callback = self._callback(self.on_amcl, robot.pk)
             subs.append(Subscription(robot.pk, pose.target, pose.message_type, callback, 0))
+        if "battery" in bindings:
+            battery = bindings["battery"]
+            callback = self._callback(self.on_battery, robot.pk)
+            subs.append(
+                Subscription(robot.pk, battery.target, battery.message_type, callback, BATTERY_EVERY_MS)
+            )
         return subs
 
     @staticmethod
@@ -148,7 +160,7 @@ class PoseHub:
             x, y, yaw = compose(offset, raw)
             self._latest[robot_id] = live.RobotPose(
                 id=robot_id, x=round(x, 3), y=round(y, 3), yaw=round(yaw, 3),
-                v=round(linear, 3), w=round(angular, 3), t=self.clock(),
+                v=round(linear, 3), w=round(angular, 3), t=self.clock(), **self._extras.get(robot_id, {}),
             )  # fmt: skip
             self._dirty.add(robot_id)
 
@@ -162,8 +174,28 @@ class PoseHub:
             self._latest[robot_id] = live.RobotPose(
                 id=robot_id, x=round(in_map[0], 3), y=round(in_map[1], 3), yaw=round(in_map[2], 3),
                 v=previous.get("v", 0.0), w=previous.get("w", 0.0), t=self.clock(),
+                **self._extras.get(robot_id, {}),
             )  # fmt: skip
             self._dirty.add(robot_id)
+
+    def on_battery(self, robot_id: int, message: dict) -> None:
+        """Take a sensor_msgs/BatteryState: its charge in percent rides along with the robot's poses."""
+        charge = message.get("percentage")
+        if isinstance(charge, bool) or not isinstance(charge, int | float) or not math.isfinite(charge):
+            return  # NaN: "not measured"
+        self._extra(robot_id, "battery", round(charge * 100 if charge <= 1 else charge, 1))
+
+    def on_round_trip(self, robot_ids, seconds: float) -> None:
+        """The round trip of the link to these robots' endpoint (a ping), carried with their poses in ms."""
+        for robot_id in robot_ids:
+            self._extra(robot_id, "rtt", round(seconds * 1000, 1))
+
+    def _extra(self, robot_id: int, key: str, value: float) -> None:
+        with self._lock:
+            self._extras[robot_id][key] = value
+            if robot_id in self._latest:
+                self._latest[robot_id] = live.RobotPose(**{**self._latest[robot_id], key: value})
+                self._dirty.add(robot_id)
 
     def take_batch(self) -> list[live.RobotPose]:
         """The poses that changed since the last tick (each robot once), and start a new tick."""
@@ -210,14 +242,34 @@ async def subscribe_all(client, subs: list[Subscription]) -> None:
         )
 
 
-async def stream_endpoint(url: str, subs: list[Subscription], stop: asyncio.Event) -> None:
-    """Follow the given topics on one endpoint until stopped, on a link of its own that reconnects by itself."""
+async def measure_round_trips(client, robot_ids, hub: PoseHub, stop: asyncio.Event | None = None) -> None:
+    """Ping the endpoint's link every ROUND_TRIP_EVERY_S and give the hub the round trip of its robots."""
+    from robots.rosbridge.errors import RosbridgeError
+
+    stop = stop or asyncio.Event()
+    while not stop.is_set() and not client.closed:
+        with contextlib.suppress(RosbridgeError):
+            hub.on_round_trip(robot_ids, await client.round_trip())
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), timeout=ROUND_TRIP_EVERY_S)
+
+
+_MEASURING: set[asyncio.Task] = set()  # the links process's round-trip tasks, kept until they end
+
+
+async def stream_endpoint(
+    url: str, subs: list[Subscription], stop: asyncio.Event, hub: PoseHub | None = None
+) -> None:
+    """Follow the given topics on one endpoint until stopped, on a link of its own that reconnects by itself
+    (and, given the hub, measure the link's round trip for the robots it carries)."""
     from robots.rosbridge.client import RosbridgeClient
 
     client = RosbridgeClient(url, reconnect=True)
     await client.start()
     try:
         await subscribe_all(client, subs)
+        if hub is not None:
+            await measure_round_trips(client, sorted({sub.robot_id for sub in subs}), hub, stop)
         await stop.wait()
     finally:
         await client.close()
@@ -233,8 +285,14 @@ def link_hook(hub: PoseHub):
         return list(Robot.objects.filter(endpoint=url).prefetch_related("bindings"))
 
     async def hook(client, _robots) -> None:
-        for robot in await sync_to_async(robots_of)(client.url):
+        robots = await sync_to_async(robots_of)(client.url)
+        for robot in robots:
             await subscribe_all(client, await sync_to_async(hub.subscriptions)(robot))
+        task = asyncio.get_running_loop().create_task(
+            measure_round_trips(client, [r.pk for r in robots], hub)
+        )
+        _MEASURING.add(task)
+        task.add_done_callback(_MEASURING.discard)
 
     return hook
 
@@ -244,5 +302,5 @@ async def follow(robots, hub: PoseHub, stop: asyncio.Event) -> None:
     per_endpoint: dict[str, list[Subscription]] = defaultdict(list)
     for robot in robots:
         per_endpoint[robot.endpoint].extend(hub.subscriptions(robot))
-    tasks = [stream_endpoint(url, subs, stop) for url, subs in per_endpoint.items() if subs]
+    tasks = [stream_endpoint(url, subs, stop, hub) for url, subs in per_endpoint.items() if subs]
     await asyncio.gather(hub.run(stop), *tasks)

@@ -54,12 +54,17 @@ class EndpointResult:
 
 
 # ----- discovery (async, no database) -----
+def endpoint_timeout() -> float:
+    """Seconds a whole endpoint's discovery may take: FLEET_DISCOVERY_TIMEOUT_S, else ENDPOINT_TIMEOUT."""
+    return float(getattr(settings, "FLEET_DISCOVERY_TIMEOUT_S", ENDPOINT_TIMEOUT))
+
+
 async def discover_one(url: str, call_timeout: float = 3.0) -> list[Graph] | RosbridgeError:
     """Discover one endpoint; every failure comes back as a RosbridgeError with a one-line reason, never raised."""
     client = RosbridgeClient(url, call_timeout=call_timeout)
     try:
         await client.connect()
-        return await asyncio.wait_for(discover(url, client), ENDPOINT_TIMEOUT)
+        return await asyncio.wait_for(discover(url, client), endpoint_timeout())
     except (BadReply, FrameTooLarge) as exc:
         return exc
     except RosbridgeError as exc:
@@ -68,7 +73,7 @@ async def discover_one(url: str, call_timeout: float = 3.0) -> list[Graph] | Ros
             return RosbridgeError(f"{url}: {UNREACHABLE}")
         return exc
     except TimeoutError:
-        return RosbridgeError(f"{url}: discovery took longer than {ENDPOINT_TIMEOUT:g} s")
+        return RosbridgeError(f"{url}: discovery took longer than {endpoint_timeout():g} s")
     except Exception as exc:  # a reply we did not foresee: that endpoint fails, the batch goes on
         log.exception("%s: discovery failed", url)
         return RosbridgeError(f"{url}: refused: discovery failed on what it answered ({type(exc).__name__})")
@@ -246,8 +251,9 @@ def store_robot(url: str, graph: Graph, vocab: identify.Vocabulary) -> tuple[Rob
     }
     robot.link_status, robot.last_seen = Robot.Link.ONLINE, timezone.now()
     robot.save()
-    graph_changes = sync_graph(robot, graph)
-    binding_changes = sync_bindings(robot, graph, vocab)
+    created = "created" in changes  # a new robot has no rows yet: nothing to look up before inserting them
+    graph_changes = sync_graph(robot, graph, created)
+    binding_changes = sync_bindings(robot, graph, vocab, created)
     if not changes:  # a new robot's whole graph is "added": record only what changed on re-registration
         changes.update(graph_changes, **binding_changes)
     return robot, changes
@@ -266,8 +272,9 @@ def unique_name(name: str, model: str = "") -> str:
     return candidate
 
 
-def sync_graph(robot: Robot, graph: Graph) -> dict:
-    """Bring topics, nodes, services and params in line with the graph; return what changed."""
+def sync_graph(robot: Robot, graph: Graph, created: bool = False) -> dict:
+    """Bring topics, nodes, services and params in line with the graph (created: the robot has none yet);
+    return what changed."""
     changes = {}
     rows = {
         "topics": (Topic, {n: {"type": t.type, "publishers": t.publishers, "subscribers": t.subscribers}
@@ -277,7 +284,7 @@ def sync_graph(robot: Robot, graph: Graph) -> dict:
         "params": (Param, {n: {"value": v if v is not None else ""} for n, v in graph.params.items()}),
     }  # fmt: skip
     for label, (model, wanted) in rows.items():
-        added, removed, changed = _sync_rows(robot, model, wanted)
+        added, removed, changed = _sync_rows(robot, model, wanted, created)
         for key, names in (
             (f"{label}_added", added),
             (f"{label}_removed", removed),
@@ -290,8 +297,8 @@ def sync_graph(robot: Robot, graph: Graph) -> dict:
     return changes
 
 
-def _sync_rows(robot: Robot, model, wanted: dict[str, dict]) -> tuple[list, list, list]:
-    existing = {row.name: row for row in model.objects.filter(robot=robot)}
+def _sync_rows(robot: Robot, model, wanted: dict[str, dict], created: bool) -> tuple[list, list, list]:
+    existing = {} if created else {row.name: row for row in model.objects.filter(robot=robot)}
     removed = [n for n in existing if n not in wanted]
     if removed:
         model.objects.filter(robot=robot, name__in=removed).delete()
@@ -309,31 +316,33 @@ def _sync_rows(robot: Robot, model, wanted: dict[str, dict]) -> tuple[list, list
     return added, removed, [row.name for row in changed]
 
 
-def sync_bindings(robot: Robot, graph: Graph, vocab: identify.Vocabulary) -> dict:
-    """Identify every action, keeping a person's choice while its target exists; return changed bindings."""
-    existing = {b.action: b for b in Binding.objects.filter(robot=robot)}
+BINDING_FIELDS = ("target", "kind", "message_type", "how", "confidence", "needs_user", "candidates")
+
+
+def sync_bindings(robot: Robot, graph: Graph, vocab: identify.Vocabulary, created: bool = False) -> dict:
+    """Identify every action, keeping a person's choice while its target exists (created: the robot has no
+    bindings yet); return changed bindings."""
+    existing = {} if created else {b.action: b for b in Binding.objects.filter(robot=robot)}
     chosen = {a: b.target for a, b in existing.items() if b.how == Binding.How.USER and b.target}
     results = identify.identify(graph, vocab, chosen)
-    changed, dropped = {}, []
+    changed, dropped, new, updated = {}, [], [], []
+    now = timezone.now()
     for action, res in results.items():
         old = existing.get(action)
         if action in chosen and res.how != Binding.How.USER:
             dropped.append(f"{action}: {chosen[action]}")
         if old is not None and old.target != res.target:
             changed[action] = [old.target, res.target]
-        Binding.objects.update_or_create(
-            robot=robot,
-            action=action,
-            defaults={
-                "target": res.target,
-                "kind": res.kind,
-                "message_type": res.message_type,
-                "how": res.how,
-                "confidence": res.confidence,
-                "needs_user": res.needs_user,
-                "candidates": res.candidates,
-            },
-        )
+        fields = {name: getattr(res, name) for name in BINDING_FIELDS}
+        if old is None:
+            new.append(Binding(robot=robot, action=action, updated_at=now, **fields))
+        elif any(getattr(old, name) != value for name, value in fields.items()):
+            for name, value in fields.items():
+                setattr(old, name, value)
+            old.updated_at = now  # bulk_update does not apply auto_now
+            updated.append(old)
+    Binding.objects.bulk_create(new)  # one insert and one update for all the robot's bindings
+    Binding.objects.bulk_update(updated, [*BINDING_FIELDS, "updated_at"])
     out = {}
     if changed:
         out["bindings_changed"] = changed

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import gc
 import logging
+import math
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
 
 from fleetcore.catalog import model
 from fleetcore.planning import Planner
@@ -26,10 +27,12 @@ NAV_HZ = 10.0  # move_base controller_frequency of the TurtleBot3 configuration
 SLOW_HZ = 5.0  # laser (TB3 LDS 5 Hz), actionlib status (5 Hz)
 AMCL_HZ = 2.0
 DOCK_STATUS_HZ = 1.0
+BATTERY_HZ = 1.0
+CAMERA_HZ = 2.0  # the synthetic camera: small frames at a low rate
 STACKS = {"move_base": MoveBase, "nav2": Nav2}
 
 
-@dataclass
+@dataclasses.dataclass
 class LoopStats:
     """How well the loop keeps real time: steps run, steps that started late, worst lag."""
 
@@ -54,12 +57,16 @@ class SimFleet:
         dt: float = DEFAULT_DT,
         odom_rate: float = 20.0,
         odom_noise: float = 0.0,
+        keep_last_command: bool = False,
+        extra_skip: int = 0,
+        extra_spacing: float | None = None,
     ) -> None:
         self.world = load_world(world) if not isinstance(world, World) else world
-        self.world.add_extra_robots(extra)
+        self.world.add_extra_robots(extra, extra_skip, extra_spacing)
         self.host = host
         self.time_scale = time_scale
         self.odom_period = 1.0 / odom_rate
+        self.keep_last_command = keep_last_command  # bases without a cmd_vel timeout: drive on for ever
         self.physics = Physics(self.world.map, dt)
         self.epoch = time.time()
         self.stats = LoopStats()
@@ -83,6 +90,8 @@ class SimFleet:
 
     def _add_robot(self, spec, odom_noise: float, planners: dict[str, Planner]) -> None:
         profile = model(spec.model)
+        if self.keep_last_command:
+            profile = dataclasses.replace(profile, cmd_timeout=math.inf)
         body = self.physics.add_robot(spec.name, profile, spec.x, spec.y, spec.yaw)
         robot = SimRobot(
             spec, profile, body, self.physics, self.servers[spec.endpoint], self.clock, odom_noise
@@ -138,7 +147,7 @@ class SimFleet:
         loop = asyncio.get_running_loop()
         period = self.physics.dt / self.time_scale
         next_t = self.stats.started = loop.time()
-        due = dict.fromkeys(("odom", "nav", "slow", "amcl", "dock"), 0.0)
+        due = dict.fromkeys(("odom", "nav", "slow", "amcl", "dock", "battery", "camera"), 0.0)
         while not self._stop.is_set():
             self.physics.step()
             self.stats.steps += 1
@@ -183,6 +192,14 @@ class SimFleet:
             due["dock"] += 1.0 / DOCK_STATUS_HZ
             for dock in self.docks:
                 dock.publish_status(stamp)
+        if t >= due["battery"]:
+            due["battery"] += 1.0 / BATTERY_HZ
+            for robot in self.robots.values():
+                robot.publish_battery(stamp, 1.0 / BATTERY_HZ)
+        if t >= due["camera"]:
+            due["camera"] += 1.0 / CAMERA_HZ
+            for robot in self.robots.values():
+                robot.publish_camera(stamp)
 
     def pose(self, name: str) -> tuple[float, float, float]:
         """Return a robot's ground-truth pose (call from the loop's thread)."""

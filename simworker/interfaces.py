@@ -202,6 +202,11 @@ def _tiago_ros1(iface: Interface, ns: str, stack: str) -> None:
         subs=[*((k, t["twist"]) for k in mux), (f"{ns}/pause_navigation", t["bool"])],
     )
     iface.add(f"{ns}/laser_filter", pubs=[(f"{ns}/scan", t["scan"])], subs=[(f"{ns}/scan_raw", t["scan"])])
+    # the head camera's image_transport republisher; frames are synthetic (simworker.camera)
+    iface.add(
+        f"{ns}/xtion/rgb/image_raw_compressed",
+        pubs=[(f"{ns}/xtion/rgb/image_raw/compressed", "sensor_msgs/CompressedImage")],
+    )
     iface.add(
         f"{ns}/robot_state_publisher",
         pubs=[(f"{ns}/tf", t["tf"]), (f"{ns}/tf_static", t["tf"])],

@@ -2,18 +2,22 @@
 
 from __future__ import annotations
 
+import base64
 import json
 import math
+import zlib
 from collections.abc import Callable
 
 from fleetcore.catalog import ModelProfile
 from fleetcore.world import RobotSpec
+from simworker import camera
 from simworker.graph import Graph
 from simworker.interfaces import build_interface
 from simworker.physics import Physics, RobotBody
 from simworker.server import RosbridgeServer
 
 MUX_TIMEOUT = 0.5  # twist_mux input timeout (s)
+IDLE_DRAIN, DRIVE_DRAIN = 0.0001, 0.005  # battery fraction per second standing, and more per m/s driven
 ZEROS36 = "[" + ",".join(["0.0"] * 36) + "]"
 
 
@@ -60,6 +64,24 @@ class SimRobot:
         self.mux_priority, self.mux_time = -1, -1e9
         self.navigator = None
         self._register()
+        published = {
+            topic: type_ for entry in self.iface.nodes.values() for topic, type_ in entry["pubs"].items()
+        }
+        self.battery_topic = next(
+            (t for t, type_ in published.items() if type_.endswith("BatteryState")), None
+        )
+        # the laser's own topic, and any filter's output (e.g. TIAGo's laser_filter: /scan from /scan_raw)
+        scans = [
+            t for t, type_ in published.items() if type_.endswith("LaserScan") and t != self.iface.scan_topic
+        ]
+        self.scan_topics = [self.iface.scan_topic, *scans] if self.iface.scan_topic else []
+        self.camera_topic = next(
+            (t for t, type_ in published.items() if type_.endswith("CompressedImage")), None
+        )
+        self.charge = (
+            0.95 - (zlib.crc32(spec.name.encode()) % 20) / 100
+        )  # each robot its own, the same each run
+        self.frames = 0
         self._odom_templates = [
             (t, self._odom_template(frame, child)) for t, frame, child in self.iface.odom_topics
         ]
@@ -153,9 +175,10 @@ class SimRobot:
             server.publish_text(topic, tpl % values)
 
     def publish_scan(self, t: float) -> None:
-        """Publish sensor_msgs/LaserScan if someone subscribes (ray casting is the costly part)."""
-        laser, topic = self.profile.laser, self.iface.scan_topic
-        if laser is None or topic is None or topic not in self.server.subscribers:
+        """Publish sensor_msgs/LaserScan on each scan topic someone subscribes to (one ray cast for all)."""
+        laser = self.profile.laser
+        wanted = [topic for topic in self.scan_topics if topic in self.server.subscribers]
+        if laser is None or not wanted:
             return
         ranges = self.physics.scan(self.body, laser, noise=0.01 if self.odom_noise else 0.0)
         n = laser.samples
@@ -171,4 +194,36 @@ class SimRobot:
             "ranges": ranges,
             "intensities": [],
         }
+        text = json.dumps(msg, separators=(",", ":"))
+        for topic in wanted:
+            self.server.publish_text(topic, text)
+
+    def publish_battery(self, t: float, dt: float) -> None:
+        """Drain the battery by dt seconds of what the robot did, and publish sensor_msgs/BatteryState."""
+        self.charge = max(0.0, self.charge - dt * (IDLE_DRAIN + DRIVE_DRAIN * abs(self.body.vx)))
+        if self.battery_topic is None or self.battery_topic not in self.server.subscribers:
+            return
+        msg = {
+            "header": self.graph.header("base_link", t),
+            "voltage": round(11.1 + 1.5 * self.charge, 3), "current": -1.2, "charge": None,
+            "capacity": None, "design_capacity": 1.8, "percentage": round(self.charge, 4),
+            "power_supply_status": 2, "power_supply_health": 1, "power_supply_technology": 3, "present": True,
+            "cell_voltage": [], "location": "", "serial_number": "",
+        }  # fmt: skip
+        self.server.publish_text(
+            self.battery_topic, json.dumps(msg, separators=(",", ":")).replace("NaN", "null")
+        )
+
+    def publish_camera(self, t: float) -> None:
+        """Publish a synthetic sensor_msgs/CompressedImage (PNG) if someone subscribes (simworker.camera)."""
+        topic = self.camera_topic
+        if topic is None or topic not in self.server.subscribers:
+            return
+        self.frames += 1
+        image = camera.render(self.physics.scan(self.body, camera.RAYS), self.frames)
+        msg = {
+            "header": self.graph.header("xtion_rgb_optical_frame", t),
+            "format": "rgb8; png compressed bgr8",
+        }
+        msg["data"] = base64.b64encode(image).decode("ascii")  # rosbridge sends uint8[] as base64
         self.server.publish_text(topic, json.dumps(msg, separators=(",", ":")))

@@ -16,10 +16,27 @@ def serve_world(
     port_base: int | None = 9090,
     extra: int = 0,
     time_scale: float = 1.0,
+    keep_last_command: bool = False,
     out: Callable[[str], None] = print,
+    endpoints: list[str] | None = None,
+    extra_skip: int = 0,
+    extra_spacing: float | None = None,
 ) -> dict:
-    """Serve the world, print one line per endpoint when ready, return the loop's stats when stopped."""
-    fleet = SimFleet(world, host, port_base, extra, time_scale=time_scale)
+    """Serve the world (only these endpoints, if given: a shard), print one line per endpoint when ready,
+    return the loop's stats when stopped."""
+    fleet = SimFleet(
+        world,
+        host,
+        port_base,
+        extra,
+        endpoints,
+        time_scale=time_scale,
+        keep_last_command=keep_last_command,
+        extra_skip=extra_skip,
+        extra_spacing=extra_spacing,
+    )
+    if not fleet.servers:
+        raise ValueError(f"no endpoint of world {world!r} to serve among {', '.join(endpoints or [])}")
 
     def ready(f: SimFleet) -> None:
         loop = asyncio.get_running_loop()

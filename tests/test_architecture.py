@@ -13,8 +13,8 @@ import fleetcore
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = [
-    "bench", "fleet", "portal", "experiments", "execution", "interpreter", "access", "places", "robots",
-    "alerts", "audit", "live", "fleetcore", "simworker",
+    "bench", "fleet", "portal", "experiments", "recordings", "execution", "interpreter", "access", "places",
+    "robots", "alerts", "audit", "live", "fleetcore", "simworker",
 ]  # fmt: skip
 LINT_IMPORTS = Path(sys.executable).with_name("lint-imports")
 

@@ -130,6 +130,11 @@ class RosbridgeClient:
     def is_connected(self) -> bool:
         return self._ws is not None
 
+    @property
+    def closed(self) -> bool:
+        """Closed for good (close() was called): it will not reconnect."""
+        return self._closing
+
     def on_link(self, callback: Callable[[bool, str], None]) -> None:
         """Call callback(up, reason) whenever the link goes up or down."""
         self._link_callbacks.append(callback)
@@ -173,6 +178,19 @@ class RosbridgeClient:
         if self._reader is not None:
             await _ended(self._reader)
         self._fail_waiting(LinkDown(f"{self.url}: closed"))
+
+    async def round_trip(self, timeout: float = 2.0) -> float:
+        """Seconds a WebSocket ping takes to come back (the link's round trip); LinkDown when it cannot."""
+        ws = self._ws
+        if ws is None:
+            raise LinkDown(f"{self.url}: not connected")
+        started = asyncio.get_running_loop().time()
+        try:
+            pong = await ws.ping()
+            await asyncio.wait_for(pong, timeout)
+        except (TimeoutError, ConnectionClosed) as exc:
+            raise LinkDown(f"{self.url}: no pong ({exc.__class__.__name__})") from None
+        return asyncio.get_running_loop().time() - started
 
     async def __aenter__(self) -> RosbridgeClient:
         await self.connect()

@@ -37,9 +37,9 @@ export function toast(text, bad = false) {
 }
 
 // State is never shown by colour alone: each state has a glyph and its name.
-export const STATE_GLYPH = { registered: "○", ready: "●", dialog: "?", motion: "➤", work: "⚙", offline: "✕" };
+export const STATE_GLYPH = { registered: "○", ready: "●", dialog: "?", motion: "➤", work: "⚙", offline: "✕", teleop: "⇆" };
 export const STATE_COLOR = {
-  registered: "#546e7a", ready: "#2e7d32", dialog: "#6a1b9a", motion: "#1565c0", work: "#ef6c00", offline: "#8d8d8d",
+  registered: "#546e7a", ready: "#2e7d32", teleop: "#00838f", dialog: "#6a1b9a", motion: "#1565c0", work: "#ef6c00", offline: "#8d8d8d",
 };
 
 export function stateBadge(state) {

@@ -1,6 +1,17 @@
 // The instruction console: type, see the parse, answer the interpreter's question in place, watch progress.
 import { request, toast } from "./api.js";
 
+const UNITS = { move_by: " m", turn_by: "°", wait: " s" };
+
+// A subject chosen by kind: {"any": true, "model": "turtlebot"} -> "any turtlebot", {"all": true, "except": [...]}.
+function robotsInWords(robots) {
+  if (!robots || typeof robots !== "object") return robots;
+  const words = [robots.all ? "all" : "any"];
+  if (robots.model) words.push(robots.model);
+  if (robots.except) words.push(`except ${robots.except.join(", ")}`);
+  return words.join(" ");
+}
+
 const TYPE_NAMES = { I: "plain", II: "synonym", III: "semantic issue", IV: "synonym and semantic issue", V: "not programmed" };
 
 export class Console {
@@ -17,7 +28,15 @@ export class Console {
 
   async submit(text, answerTo = null) {
     if (!text) return null;
-    return this.send(answerTo ? { text, answer_to: answerTo } : { text });
+    const body = answerTo ? { text, answer_to: answerTo } : { text };
+    const selected = this.selectedIds();
+    if (selected.length) body.robot_ids = selected; // a text that names no robot goes to the ones selected
+    return this.send(body);
+  }
+
+  // The robots ticked in the page's robot table (dashboard), by id; none on pages without one.
+  selectedIds() {
+    return [...document.querySelectorAll("#robot-table tr.selected[data-robot-id]")].map((tr) => Number(tr.dataset.robotId));
   }
 
   // body: { text } typed by a person, or { robot_ids, destination } from a click on the map or a location.
@@ -38,6 +57,7 @@ export class Console {
   async deliver(body) {
     if (this.live && this.live.open && body.text) {
       const message = { command: "instruct", text: body.text, answer_to: body.answer_to ?? null };
+      if (body.robot_ids) message.robot_ids = body.robot_ids;
       const reply = await this.live.request(message, 120000); // answered once stored and dispatched
       if (reply === null) throw new Error("no answer yet over the live connection (see History before sending again)");
       if (!reply.ok) throw new Error(reply.detail);
@@ -63,9 +83,11 @@ export class Console {
     steps.className = "steps";
     (parse.steps || []).forEach((step) => {
       const li = document.createElement("li");
-      const robots = Array.isArray(step.robots) ? step.robots.join(", ") : step.robots;
+      const robots = Array.isArray(step.robots) ? step.robots.join(", ") : robotsInWords(step.robots);
+      const amount = step.amount != null ? ` ${step.amount}${UNITS[step.action] || ""}` : "";
+      const loop = step.span ? ` the ${step.span} step(s) before, until stopped` : "";
       const where = step.destination ? ` to ${step.destination.name || ""}${step.destination.x != null ? ` (${step.destination.x}, ${step.destination.y})` : ""}` : "";
-      li.textContent = `${step.action || "?"} ${robots || ""}${where}${step.task ? ` then ${step.task}` : ""}${step.speed ? `, ${step.speed}` : ""}`;
+      li.textContent = `${step.action || "?"} ${robots || ""}${amount}${loop}${where}${step.task ? ` then ${step.task}` : ""}${step.speed ? `, ${step.speed}` : ""}`;
       steps.append(li);
     });
     box.append(steps);
@@ -92,9 +114,17 @@ export class Console {
     asked.append(parse.question || parse.reason || "Please explain this instruction.");
     const form = document.createElement("form");
     form.innerHTML = `<label for="answer-${instruction.id}">Your answer</label>
-      <input type="text" id="answer-${instruction.id}" class="answer" placeholder="e.g. zoom means move" required>
+      <input type="text" id="answer-${instruction.id}" class="answer" required>
       <button type="submit" class="primary">Answer</button>`;
-    form.addEventListener("submit", (event) => { event.preventDefault(); this.answer(instruction, form.querySelector("input").value.trim()); });
+    // The example fits the question: about the word asked ("zoom means move"), or the instruction said again
+    // with what was missing ("move husky 1 meter forward").
+    form.querySelector("input").placeholder = `e.g. ${parse.answer_example || "zoom means move"}`;
+    const rephrase = parse.type === "III" || parse.type === "IV"; // a semantic issue: answered by a new instruction
+    form.addEventListener("submit", (event) => {
+      event.preventDefault();
+      const text = form.querySelector("input").value.trim();
+      if (rephrase) this.submit(text, instruction.id); else this.answer(instruction, text);
+    });
     box.append(asked, form);
     setTimeout(() => form.querySelector("input").focus(), 0);
     return box;
@@ -105,7 +135,7 @@ export class Console {
     try {
       const taught = await request("/api/interpreter/teach", { answer: text, instruction_id: instruction.id });
       if (taught && taught.ok === false) {
-        toast(`${taught.message}${taught.examples ? ` Try e.g. "${taught.examples[0]}".` : ""}`, true);
+        toast(taught.message, true); // it ends with an example about the word asked
         return;
       }
       toast((taught && taught.message) || `Learned: ${text}`);

@@ -1,6 +1,6 @@
 // The dashboard and the robot list: live table, live map, console; map clicks send the selected robots,
 // the robot list's buttons stop them or take or release control of them.
-import { request, toast } from "./api.js";
+import { canControl, request, toast } from "./api.js";
 import { Console } from "./console.js";
 import { connectLive } from "./live.js";
 import { FleetMap } from "./map.js";
@@ -16,6 +16,7 @@ async function sendSelected(target) {
   const robots = table.selected();
   if (!robots.length) { toast("Select one or more robots in the table first.", true); return; }
   const destination = target.id != null ? { location: Number(target.id) } : { x: target.x, y: target.y };
+  if (target.yaw != null) destination.yaw = target.yaw; // a goal dragged on the map: the heading to end with
   await console_.send({ robot_ids: robots.map((robot) => robot.id), destination });
 }
 
@@ -39,7 +40,10 @@ if (filter) filter.addEventListener("input", () => table.filter(filter.value));
 if (table.pickAll) table.pickAll.addEventListener("change", () => table.selectAll(table.pickAll.checked));
 document.querySelectorAll("button[data-selected]").forEach((button) => button.addEventListener("click", () => forSelected(button.dataset.selected)));
 
-const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, sendSelected) : null;
+// the robot the map follows shows its laser scan (the socket follows that one robot's scan)
+const onFollow = (id) => { if (console_.live) console_.live.send({ command: "watch", robot: id }); };
+const mapOptions = canControl() ? { onPick: sendSelected, onGoal: sendSelected, onFollow } : { onFollow };
+const map = canvas && mapData && mapData.map ? new FleetMap(canvas, mapData, mapOptions) : null;
 document.querySelectorAll("button.goto").forEach((button) => button.addEventListener("click", () => sendSelected({ id: button.dataset.locationId, name: button.dataset.location })));
 
 console_.live = connectLive("/ws/fleet/", {
@@ -48,7 +52,7 @@ console_.live = connectLive("/ws/fleet/", {
     if (map) map.setRobots(message.robots);
   },
   "robot.status"(message) {
-    const changes = { state: message.state, link_status: message.link_status };
+    const changes = { state: message.state, link_status: message.link_status, last_seen: message.last_seen };
     if (!table.update(message.id, changes)) table.load([...table.robots.values(), { id: message.id, name: message.robot, ...changes }]);
     if (map) map.update(message.id, changes);
   },
@@ -61,8 +65,15 @@ console_.live = connectLive("/ws/fleet/", {
     const goal = message.x == null ? null : { name: message.name, x: message.x, y: message.y };
     if (map) map.update(message.id, { goal });
   },
-  "robot.path"(message) { if (map) map.path(message); },
-  "lease.update"(message) { table.update(message.id, { holder: message.holder }); },
+  "robot.scan"(message) { if (map && map.following === message.id) map.setScan(message.id, message.scan); },
+  "robot.path"(message) {
+    if (map) map.path(message);
+    table.update(message.id, { waitingFor: message.waiting_for });
+  },
+  "lease.update"(message) {
+    table.update(message.id, { holder: message.holder, held_until: message.expires_at });
+    if (map) map.update(message.id, { holder: message.holder });
+  },
   "instruction.update"(message) {
     console_.instructionUpdate(message);
     const done = ["succeeded", "failed", "cancelled", "refused"].includes(message.status);
@@ -71,9 +82,14 @@ console_.live = connectLive("/ws/fleet/", {
     });
   },
   "fleet.poses"(message) {
-    message.poses.forEach((pose) => { table.speed(pose.id, pose); if (map) map.pose(pose); });
+    message.poses.forEach((pose) => {
+      table.speed(pose.id, pose);
+      if (map) map.pose(pose);
+    });
   },
   "command.result"(message) { toast(message.detail, !message.ok); },
 });
+
+setInterval(() => table.tick(), 2000); // "last seen" ages
 
 window.fleet = { map, table, console: console_ }; // for the browser tests and the curious

@@ -1,26 +1,79 @@
 // The live map on a canvas: occupancy grid, locations, robots as oriented footprints with names, state glyphs,
-// trails, goals, reserved routes and whom a robot waits for. Drawing is coalesced to one frame per animation tick, however many poses arrive.
+// trails, goals, reserved routes, whom a robot waits for, and a selected robot's laser scan.
+//
+// A view (zoom and centre) the person moves: wheel zooms about the cursor, drag pans, two fingers pinch, the
+// toolbar fits everything or follows a robot. Labels never cover each other: a label that cannot sit above its
+// robot is moved out along a ring of places and tied to it by a leader line; hovering (or tapping) a robot or a
+// crowd opens a card naming every robot there. Drawing is coalesced to one frame per animation tick.
 import { STATE_COLOR, STATE_GLYPH } from "./api.js";
 
 const TRAIL_POINTS = 120;
 const PICK_RADIUS_M = 0.4;
+const PICK_PX = 12; // css px: robots this near the pointer are "here", however small they are drawn
+const DRAG_PX = 5; // css px a press must move to be a drag, not a click
 const MIN_DRAWN_M = 0.18; // small robots are drawn at least this big (metres) so they stay visible
+const MIN_ZOOM = 0.5;
+const MAX_ZOOM = 80;
 const DEFAULT_FOOTPRINT = [[0.2, 0], [-0.15, 0.15], [-0.15, -0.15]];
-// Labels are placed busy robots' first; one that would cover a label already placed is left out, so a map of
-// hundreds of robots stays readable (every robot is still drawn, over the labels, and listed in the table).
+// Labels are placed busy robots' first; a label finds the first free place on rings around its robot (above it
+// first), so a crowd is named with leader lines; one with no free place within LABEL_RINGS rings is left out
+// (the card still names it, the table lists it).
 const LABEL_RANK = { motion: 3, work: 3, dialog: 3, ready: 2, registered: 1 };
+const LABEL_RINGS = 6;
+const DIRECTIONS = [[0, -1], [1, -1], [-1, -1], [1, 0], [-1, 0], [0, 1], [1, 1], [-1, 1]]; // above first
+const CARD_ROBOTS = 12;
+
+// Boxes [x, y, w, h] in a coarse grid of cells, so overlap checks stay local with hundreds of labels.
+class BoxIndex {
+  constructor(cell) { this.cell = cell; this.cells = new Map(); }
+  *keys([x, y, w, h]) {
+    for (let i = Math.floor(x / this.cell); i <= Math.floor((x + w) / this.cell); i += 1) {
+      for (let j = Math.floor(y / this.cell); j <= Math.floor((y + h) / this.cell); j += 1) yield `${i},${j}`;
+    }
+  }
+  add(box) { for (const key of this.keys(box)) (this.cells.get(key) || this.cells.set(key, []).get(key)).push(box); }
+  hits(box) {
+    for (const key of this.keys(box)) {
+      for (const [x, y, w, h] of this.cells.get(key) || []) {
+        if (box[0] < x + w && x < box[0] + box[2] && box[1] < y + h && y < box[1] + box[3]) return true;
+      }
+    }
+    return false;
+  }
+}
 
 export class FleetMap {
-  constructor(canvas, mapData, onPick) {
+  // options: onPick({id, name} | {x, y}) for a click, onGoal({x, y, yaw}) for a press-and-drag in goal mode.
+  constructor(canvas, mapData, options = {}) {
+    if (typeof options === "function") options = { onPick: options };
     this.canvas = canvas;
     this.map = mapData.map;
     this.locations = mapData.locations || [];
-    this.onPick = onPick;
+    this.onPick = options.onPick || null;
+    this.onGoal = options.onGoal || null;
+    this.onFollow = options.onFollow || null; // (id or null): the page may follow that robot's scan
     this.robots = new Map();
     this.trails = new Map();
+    this.scan = null;
+    this.labels = [];
+    this.labelled = [];
     this.grid = this.renderGrid();
+    this.zoom = 1;
+    this.center = this.mapCenter();
+    this.following = null;
+    this.tool = "pan";
+    this.pointers = new Map();
+    this.gesture = null;
     this.queued = false;
-    canvas.addEventListener("click", (event) => this.click(event));
+    this.ratio = window.devicePixelRatio || 1;
+    this.wrap = canvas.parentElement;
+    this.card = document.createElement("div");
+    this.card.className = "map-card";
+    this.card.hidden = true;
+    this.card.setAttribute("role", "status");
+    this.wrap.append(this.card);
+    this.toolbar = this.buildToolbar();
+    this.listen();
     new ResizeObserver(() => this.redraw()).observe(canvas);
   }
 
@@ -43,46 +96,327 @@ export class FleetMap {
     return image;
   }
 
+  // ---- the view: zoom about a point, pan, fit, follow ------------------------------------------------------
+
+  mapCenter() {
+    const [ox, oy] = this.map.origin;
+    return [ox + (this.map.width * this.map.resolution) / 2, oy + (this.map.height * this.map.resolution) / 2];
+  }
+
   layout() {
     const ratio = window.devicePixelRatio || 1;
     const box = this.canvas.getBoundingClientRect();
-    this.canvas.width = Math.round(box.width * ratio);
-    this.canvas.height = Math.round(box.height * ratio);
-    const worldW = this.map.width * this.map.resolution;
-    const worldH = this.map.height * this.map.resolution;
-    this.scale = Math.min(this.canvas.width / worldW, this.canvas.height / worldH);
-    this.offsetX = (this.canvas.width - worldW * this.scale) / 2;
-    this.offsetY = (this.canvas.height - worldH * this.scale) / 2;
+    const width = Math.max(1, Math.round(box.width * ratio));
+    const height = Math.max(1, Math.round(box.height * ratio));
+    if (this.canvas.width !== width) this.canvas.width = width;
+    if (this.canvas.height !== height) this.canvas.height = height;
     this.ratio = ratio;
+    this.fitScale = this.fitScaleFor(this.map.width * this.map.resolution, this.map.height * this.map.resolution);
+    this.scale = this.fitScale * this.zoom; // device pixels per metre
+  }
+
+  fitScaleFor(worldW, worldH) {
+    return 0.96 * Math.min(this.canvas.width / Math.max(worldW, 0.5), this.canvas.height / Math.max(worldH, 0.5));
   }
 
   toScreen(x, y) {
-    const [ox, oy] = this.map.origin;
-    const worldH = this.map.height * this.map.resolution;
-    return [this.offsetX + (x - ox) * this.scale, this.offsetY + (worldH - (y - oy)) * this.scale];
+    return [this.canvas.width / 2 + (x - this.center[0]) * this.scale, this.canvas.height / 2 - (y - this.center[1]) * this.scale];
   }
 
   toWorld(px, py) {
-    const [ox, oy] = this.map.origin;
-    const worldH = this.map.height * this.map.resolution;
-    return [(px - this.offsetX) / this.scale + ox, worldH - (py - this.offsetY) / this.scale + oy];
+    return [this.center[0] + (px - this.canvas.width / 2) / this.scale, this.center[1] - (py - this.canvas.height / 2) / this.scale];
   }
 
-  click(event) {
+  // Device pixels on the canvas of a pointer event (or of client coordinates).
+  eventPoint(event) {
     const box = this.canvas.getBoundingClientRect();
-    const [x, y] = this.toWorld((event.clientX - box.left) * this.ratio, (event.clientY - box.top) * this.ratio);
-    const near = this.locations.find((spot) => Math.hypot(spot.x - x, spot.y - y) < PICK_RADIUS_M);
-    this.onPick(near ? { id: near.id, name: near.name } : { x: Math.round(x * 10) / 10, y: Math.round(y * 10) / 10 });
+    return [(event.clientX - box.left) * this.ratio, (event.clientY - box.top) * this.ratio];
   }
+
+  // The map point under client (page viewport) coordinates: what the tests and the card read.
+  worldAt(clientX, clientY) {
+    this.layout();
+    return this.toWorld(...this.eventPoint({ clientX, clientY }));
+  }
+
+  // Zoom by factor keeping the world point under (px, py) where it is (about the followed robot when following).
+  zoomAt(px, py, factor) {
+    this.layout();
+    if (this.following != null) [px, py] = [this.canvas.width / 2, this.canvas.height / 2];
+    const [wx, wy] = this.toWorld(px, py);
+    this.zoom = Math.min(MAX_ZOOM, Math.max(MIN_ZOOM, this.zoom * factor));
+    this.scale = this.fitScale * this.zoom;
+    this.center = [wx - (px - this.canvas.width / 2) / this.scale, wy + (py - this.canvas.height / 2) / this.scale];
+    this.redraw();
+  }
+
+  panBy(dx, dy) {
+    this.center = [this.center[0] - dx / this.scale, this.center[1] + dy / this.scale];
+    this.follow(null);
+  }
+
+  // Show the whole map and every robot on it.
+  fit() {
+    this.layout();
+    const [ox, oy] = this.map.origin;
+    let [x0, y0, x1, y1] = [ox, oy, ox + this.map.width * this.map.resolution, oy + this.map.height * this.map.resolution];
+    this.robots.forEach((robot) => {
+      const at = this.where(robot);
+      if (at) { x0 = Math.min(x0, at[0]); y0 = Math.min(y0, at[1]); x1 = Math.max(x1, at[0]); y1 = Math.max(y1, at[1]); }
+    });
+    this.zoom = Math.min(MAX_ZOOM, Math.max(MIN_ZOOM, this.fitScaleFor(x1 - x0, y1 - y0) / this.fitScale));
+    this.center = [(x0 + x1) / 2, (y0 + y1) / 2];
+    this.follow(null);
+  }
+
+  // Keep a robot (id) in the middle as it moves; null stops following.
+  follow(id, zoom = null) {
+    const before = this.following;
+    this.following = id == null || !this.robots.has(Number(id)) ? null : Number(id);
+    if (this.following !== before) {
+      if (this.scan && this.scan.id !== this.following) this.scan = null;
+      if (this.onFollow) this.onFollow(this.following);
+    }
+    if (this.followSelect) this.followSelect.value = this.following == null ? "" : String(this.following);
+    if (this.following != null) {
+      if (zoom) this.zoom = Math.max(this.zoom, zoom);
+      const at = this.where(this.robots.get(this.following));
+      if (at) this.center = [at[0], at[1]];
+    }
+    this.redraw();
+  }
+
+  // ---- the toolbar and the pointer ---------------------------------------------------------------------------
+
+  buildToolbar() {
+    const bar = document.createElement("div");
+    bar.className = "map-tools";
+    bar.setAttribute("role", "toolbar");
+    bar.setAttribute("aria-label", "Map view");
+    const button = (text, label, action) => {
+      const b = document.createElement("button");
+      b.type = "button";
+      b.textContent = text;
+      b.setAttribute("aria-label", label);
+      b.title = label;
+      b.addEventListener("click", action);
+      bar.append(b);
+      return b;
+    };
+    const centre = () => { this.layout(); return [this.canvas.width / 2, this.canvas.height / 2]; };
+    button("+", "Zoom in", () => this.zoomAt(...centre(), 1.5));
+    button("−", "Zoom out", () => this.zoomAt(...centre(), 1 / 1.5));
+    button("Fit all", "Fit the whole map and every robot", () => this.fit());
+    const label = document.createElement("label");
+    label.textContent = "Follow ";
+    this.followSelect = document.createElement("select");
+    this.followSelect.setAttribute("aria-label", "Follow a robot");
+    this.followSelect.addEventListener("change", () => this.follow(this.followSelect.value || null, 3));
+    label.append(this.followSelect);
+    bar.append(label);
+    if (this.onGoal) {
+      this.goalButton = button("◎ Goal", "Goal mode: press where the robots should go and drag toward their heading", () => this.setTool(this.tool === "goal" ? "pan" : "goal"));
+      this.goalButton.setAttribute("aria-pressed", "false");
+    }
+    this.wrap.before(bar);
+    return bar;
+  }
+
+  setTool(tool) {
+    this.tool = tool;
+    this.canvas.dataset.tool = tool;
+    if (this.goalButton) this.goalButton.setAttribute("aria-pressed", String(tool === "goal"));
+  }
+
+  fillFollow() {
+    if (!this.followSelect) return;
+    const options = [["", "nobody"], ...[...this.robots.values()].sort((a, b) => a.name.localeCompare(b.name)).map((r) => [String(r.id), r.name])];
+    this.followSelect.replaceChildren(...options.map(([value, text]) => new Option(text, value)));
+    this.followSelect.value = this.following == null ? "" : String(this.following);
+  }
+
+  listen() {
+    const canvas = this.canvas;
+    canvas.tabIndex = 0;
+    canvas.style.touchAction = "none"; // the map handles pinch and drag itself
+    canvas.addEventListener("wheel", (event) => {
+      event.preventDefault();
+      const step = event.deltaMode === 1 ? 0.05 : 0.0015; // lines or pixels
+      this.zoomAt(...this.eventPoint(event), Math.exp(-event.deltaY * step));
+    }, { passive: false });
+    canvas.addEventListener("pointerdown", (event) => this.down(event));
+    canvas.addEventListener("pointermove", (event) => this.move(event));
+    canvas.addEventListener("pointerup", (event) => this.up(event));
+    canvas.addEventListener("pointercancel", (event) => { this.pointers.delete(event.pointerId); this.gesture = null; this.redraw(); });
+    canvas.addEventListener("pointerleave", (event) => { if (event.pointerType === "mouse" && !this.card.dataset.pinned) this.hideCard(); });
+    canvas.addEventListener("contextmenu", (event) => event.preventDefault());
+    canvas.addEventListener("keydown", (event) => this.key(event));
+  }
+
+  key(event) {
+    const step = 40 * this.ratio;
+    const centre = [this.canvas.width / 2, this.canvas.height / 2];
+    const actions = {
+      "+": () => this.zoomAt(...centre, 1.5), "=": () => this.zoomAt(...centre, 1.5), "-": () => this.zoomAt(...centre, 1 / 1.5),
+      0: () => this.fit(), ArrowLeft: () => this.panBy(step, 0), ArrowRight: () => this.panBy(-step, 0),
+      ArrowUp: () => this.panBy(0, step), ArrowDown: () => this.panBy(0, -step), Escape: () => this.hideCard(),
+    };
+    if (actions[event.key]) { event.preventDefault(); actions[event.key](); }
+  }
+
+  down(event) {
+    this.canvas.setPointerCapture(event.pointerId);
+    const point = this.eventPoint(event);
+    this.pointers.set(event.pointerId, point);
+    if (this.pointers.size === 2) {
+      const [a, b] = [...this.pointers.values()];
+      this.gesture = { kind: "pinch", distance: Math.hypot(a[0] - b[0], a[1] - b[1]), mid: [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2] };
+      return;
+    }
+    if (this.pointers.size > 2) return;
+    const goal = this.tool === "goal" && this.onGoal && event.button === 0;
+    this.gesture = { kind: goal ? "goal" : "pan", start: point, last: point, moved: false, world: this.toWorld(...point), touch: event.pointerType !== "mouse" };
+  }
+
+  move(event) {
+    const point = this.eventPoint(event);
+    if (!this.pointers.has(event.pointerId)) { if (event.pointerType === "mouse") this.hover(point); return; }
+    this.pointers.set(event.pointerId, point);
+    const gesture = this.gesture;
+    if (!gesture) return;
+    if (gesture.kind === "pinch") {
+      const [a, b] = [...this.pointers.values()];
+      const distance = Math.hypot(a[0] - b[0], a[1] - b[1]);
+      const mid = [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2];
+      this.panBy(mid[0] - gesture.mid[0], mid[1] - gesture.mid[1]);
+      if (gesture.distance > 0) this.zoomAt(...mid, distance / gesture.distance);
+      Object.assign(gesture, { distance, mid });
+      return;
+    }
+    if (Math.hypot(point[0] - gesture.start[0], point[1] - gesture.start[1]) > DRAG_PX * this.ratio) gesture.moved = true;
+    if (gesture.kind === "pan" && gesture.moved) this.panBy(point[0] - gesture.last[0], point[1] - gesture.last[1]);
+    if (gesture.kind === "goal" && gesture.moved) {
+      const [wx, wy] = this.toWorld(...point);
+      gesture.yaw = Math.atan2(wy - gesture.world[1], wx - gesture.world[0]);
+      this.redraw();
+    }
+    gesture.last = point;
+  }
+
+  up(event) {
+    if (!this.pointers.delete(event.pointerId)) return;
+    const gesture = this.gesture;
+    if (!gesture || gesture.kind === "pinch") { if (!this.pointers.size) this.gesture = null; return; }
+    this.gesture = null;
+    if (gesture.kind === "goal" && gesture.moved) {
+      const [x, y] = gesture.world;
+      const round = (value, digits) => Math.round(value * 10 ** digits) / 10 ** digits;
+      this.redraw();
+      this.onGoal({ x: round(x, 2), y: round(y, 2), yaw: round(gesture.yaw, 3) });
+      return;
+    }
+    if (!gesture.moved) this.tap(gesture.start);
+  }
+
+  // A click or a tap: on robots, the card naming them (pinned); elsewhere, the place for onPick.
+  tap(point) {
+    const here = this.robotsAt(point);
+    if (here.length) { this.showCard(here, point, true); return; }
+    this.hideCard();
+    if (!this.onPick) return;
+    const [x, y] = this.toWorld(...point);
+    const near = this.locations.find((spot) => Math.hypot(spot.x - x, spot.y - y) < Math.max(PICK_RADIUS_M, (PICK_PX * this.ratio) / this.scale));
+    this.onPick(near ? { id: near.id, name: near.name } : { x: Math.round(x * 100) / 100, y: Math.round(y * 100) / 100 });
+  }
+
+  hover(point) {
+    if (this.card.dataset.pinned) return;
+    const here = this.robotsAt(point);
+    if (here.length) this.showCard(here, point, false); else this.hideCard();
+  }
+
+  // The robots at a canvas point: within PICK_PX of it or of their drawn body, or whose label is there.
+  robotsAt([px, py]) {
+    const found = [];
+    this.robots.forEach((robot) => {
+      const at = this.where(robot);
+      if (!at) return;
+      const [sx, sy] = this.toScreen(at[0], at[1]);
+      const distance = Math.hypot(sx - px, sy - py);
+      const label = this.labels.find((entry) => entry.id === robot.id);
+      const onLabel = label && px >= label.box[0] && px <= label.box[0] + label.box[2] && py >= label.box[1] && py <= label.box[1] + label.box[3];
+      if (onLabel || distance <= Math.max(PICK_PX * this.ratio, this.reach(robot) * this.scale)) found.push([onLabel ? -1 : distance, robot]);
+    });
+    return found.sort((a, b) => a[0] - b[0]).map(([, robot]) => robot);
+  }
+
+  showCard(robots, [px, py], pinned) {
+    const card = this.card;
+    card.replaceChildren();
+    if (pinned) card.dataset.pinned = "1"; else delete card.dataset.pinned;
+    const title = document.createElement("div");
+    title.className = "map-card-title";
+    title.textContent = robots.length === 1 ? "1 robot here" : `${robots.length} robots here`;
+    card.append(title);
+    const list = document.createElement("ul");
+    robots.slice(0, CARD_ROBOTS).forEach((robot) => {
+      const li = document.createElement("li");
+      li.dataset.robotId = robot.id;
+      const name = document.createElement("a");
+      name.href = `/robots/${robot.id}/`;
+      name.textContent = `${STATE_GLYPH[robot.state] || "•"} ${robot.name}`;
+      const facts = [robot.state, robot.model, robot.pose ? `${Math.abs(robot.pose.v || 0).toFixed(2)} m/s` : null,
+        robot.pose && robot.pose.battery != null ? `battery ${Math.round(robot.pose.battery)}%` : null,
+        robot.waitingFor ? `waiting for ${robot.waitingFor}` : null, robot.holder ? `held by ${robot.holder}` : null].filter(Boolean);
+      const detail = document.createElement("span");
+      detail.className = "muted";
+      detail.textContent = ` ${facts.join(" · ")}`;
+      li.append(name, detail);
+      if (pinned) {
+        const follow = document.createElement("button");
+        follow.type = "button";
+        follow.textContent = "Follow";
+        follow.addEventListener("click", () => { this.follow(robot.id, 3); this.hideCard(); });
+        li.append(" ", follow);
+      }
+      list.append(li);
+    });
+    card.append(list);
+    if (robots.length > CARD_ROBOTS) card.append(`… and ${robots.length - CARD_ROBOTS} more (zoom in)`);
+    if (pinned) {
+      const close = document.createElement("button");
+      close.type = "button";
+      close.className = "map-card-close";
+      close.textContent = "×";
+      close.setAttribute("aria-label", "Close");
+      close.addEventListener("click", () => this.hideCard());
+      card.prepend(close);
+    }
+    card.hidden = false;
+    const width = this.canvas.clientWidth;
+    const x = px / this.ratio + 14;
+    card.style.left = `${Math.max(0, Math.min(x, width - card.offsetWidth - 4))}px`;
+    card.style.top = `${Math.max(0, py / this.ratio + 14)}px`;
+  }
+
+  hideCard() {
+    this.card.hidden = true;
+    delete this.card.dataset.pinned;
+  }
+
+  // ---- what the page feeds it ----------------------------------------------------------------------------
 
   setRobots(rows) {
-    this.robots = new Map(rows.map((robot) => [robot.id, { ...robot }]));
+    // a snapshot's waiting_for (whom a robot waits for) is what robot.path messages say later
+    this.robots = new Map(rows.map((robot) => [robot.id, { waitingFor: robot.waiting_for || null, ...robot }]));
+    this.fillFollow();
     this.redraw();
   }
 
   update(id, changes) {
     const robot = this.robots.get(id);
     if (robot) Object.assign(robot, changes);
+    if (robot && "name" in changes) this.fillFollow();
     this.redraw();
   }
 
@@ -95,6 +429,7 @@ export class FleetMap {
     if (!last || Math.hypot(last[0] - pose.x, last[1] - pose.y) > 0.03) trail.push([pose.x, pose.y]);
     if (trail.length > TRAIL_POINTS) trail.shift();
     this.trails.set(pose.id, trail);
+    if (this.following === pose.id) this.center = [pose.x, pose.y];
     this.redraw();
   }
 
@@ -107,11 +442,29 @@ export class FleetMap {
     this.redraw();
   }
 
+  // A sensor_msgs/LaserScan of one robot, placed at the robot's pose when it came (the laser at its centre).
+  setScan(id, message) {
+    const robot = this.robots.get(id);
+    const at = robot && this.where(robot);
+    if (!at || !message || !Array.isArray(message.ranges)) { this.scan = null; this.redraw(); return; }
+    const [x, y, yaw] = at;
+    const points = [];
+    message.ranges.forEach((range, i) => {
+      if (range == null || !Number.isFinite(range) || range < message.range_min || range > message.range_max) return;
+      const angle = yaw + message.angle_min + i * message.angle_increment;
+      points.push([x + range * Math.cos(angle), y + range * Math.sin(angle)]);
+    });
+    this.scan = { id, points };
+    this.redraw();
+  }
+
   where(robot) {
     if (robot.pose) return [robot.pose.x, robot.pose.y, robot.pose.yaw];
     if (robot.start_pose && robot.start_pose.length >= 2) return [robot.start_pose[0], robot.start_pose[1], robot.start_pose[2] || 0];
     return null;
   }
+
+  // ---- drawing -------------------------------------------------------------------------------------------
 
   redraw() {
     if (this.queued) return;
@@ -131,10 +484,11 @@ export class FleetMap {
     this.robots.forEach((robot) => this.drawTrail(context, robot));
     this.robots.forEach((robot) => this.drawRoute(context, robot));
     this.robots.forEach((robot) => this.drawGoal(context, robot));
-    const placed = [];
-    const byRank = [...this.robots.values()].sort((a, b) => (LABEL_RANK[b.state] || 0) - (LABEL_RANK[a.state] || 0));
-    this.labelled = byRank.filter((robot) => this.drawLabel(context, robot, placed)).map((robot) => robot.name);
+    this.drawScan(context);
     this.robots.forEach((robot) => this.drawRobot(context, robot));
+    this.drawLabels(context);
+    this.drawGoalDrag(context);
+    this.drawScaleBar(context);
   }
 
   footprint(robot) {
@@ -157,9 +511,6 @@ export class FleetMap {
     context.beginPath();
     context.moveTo(x, y - r); context.lineTo(x + r, y); context.lineTo(x, y + r); context.lineTo(x - r, y); context.closePath();
     context.fill(); context.stroke();
-    context.font = this.font(12, 700);
-    context.fillStyle = "#263238";
-    context.fillText(spot.name, x + r + 2 * this.ratio, y - r);
   }
 
   drawTrail(context, robot) {
@@ -215,6 +566,54 @@ export class FleetMap {
     }
   }
 
+  drawScan(context) {
+    if (!this.scan) return;
+    context.fillStyle = "#d81b60";
+    const size = Math.max(2, 2.5 * this.ratio);
+    this.scan.points.forEach(([x, y]) => {
+      const [px, py] = this.toScreen(x, y);
+      context.fillRect(px - size / 2, py - size / 2, size, size);
+    });
+  }
+
+  // While a goal is dragged: where it is and the heading it will have.
+  drawGoalDrag(context) {
+    const gesture = this.gesture;
+    if (!gesture || gesture.kind !== "goal" || !gesture.moved || gesture.yaw == null) return;
+    const [x, y] = this.toScreen(...gesture.world);
+    const length = 36 * this.ratio;
+    const [hx, hy] = [x + Math.cos(gesture.yaw) * length, y - Math.sin(gesture.yaw) * length];
+    context.strokeStyle = "#c62828";
+    context.lineWidth = 3 * this.ratio;
+    context.beginPath();
+    context.arc(x, y, 7 * this.ratio, 0, Math.PI * 2);
+    context.moveTo(x, y); context.lineTo(hx, hy);
+    const back = 10 * this.ratio;
+    for (const side of [-0.5, 0.5]) {
+      context.moveTo(hx, hy);
+      context.lineTo(hx - Math.cos(gesture.yaw + side) * back, hy + Math.sin(gesture.yaw + side) * back);
+    }
+    context.stroke();
+  }
+
+  // A bar of a round length (0.1 m ... 500 m) about 100 css px long, bottom left: how far is far.
+  drawScaleBar(context) {
+    const target = 100 * this.ratio / this.scale;
+    const nice = [0.1, 0.2, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500].find((value) => value >= target * 0.6) || 500;
+    const length = nice * this.scale;
+    const [x, y] = [10 * this.ratio, this.canvas.height - 12 * this.ratio];
+    context.fillStyle = "rgba(255,255,255,.85)";
+    context.fillRect(x - 4 * this.ratio, y - 18 * this.ratio, length + 8 * this.ratio + 50 * this.ratio, 24 * this.ratio);
+    context.strokeStyle = "#263238";
+    context.lineWidth = 2 * this.ratio;
+    context.beginPath();
+    context.moveTo(x, y - 6 * this.ratio); context.lineTo(x, y); context.lineTo(x + length, y); context.lineTo(x + length, y - 6 * this.ratio);
+    context.stroke();
+    context.font = this.font(11, 600);
+    context.fillStyle = "#263238";
+    context.fillText(nice < 1 ? `${Math.round(nice * 100)} cm` : `${nice} m`, x + length + 6 * this.ratio, y - 2 * this.ratio);
+  }
+
   drawRobot(context, robot) {
     const at = this.where(robot);
     if (!at) return;
@@ -236,7 +635,7 @@ export class FleetMap {
     context.globalAlpha = robot.link_status === "offline" ? 0.45 : 0.9;
     context.fill();
     context.globalAlpha = 1;
-    context.lineWidth = 2 * this.ratio;
+    context.lineWidth = (this.following === robot.id || (this.scan && this.scan.id === robot.id) ? 3.5 : 2) * this.ratio;
     context.strokeStyle = "#111";
     if (robot.link_status === "offline") context.setLineDash([4 * this.ratio, 3 * this.ratio]);
     context.stroke();
@@ -248,24 +647,86 @@ export class FleetMap {
     context.restore();
   }
 
-  // The robot's name and state glyph above it, unless that would cover a label in placed; true if drawn.
-  drawLabel(context, robot, placed) {
-    const at = this.where(robot);
-    if (!at) return false;
-    const [cx, cy] = this.toScreen(at[0], at[1]);
-    const top = cy - this.reach(robot) * this.scale - 20 * this.ratio;
-    const waiting = robot.waitingFor ? ` ⏸ waiting for ${robot.waitingFor}` : "";
-    const label = `${STATE_GLYPH[robot.state] || "•"} ${robot.name}${waiting}`;
+  // Robots' labels (busy ones first), then locations' names: each on the first free place of the rings around
+  // its anchor, tied to it by a leader line when it is not in its usual place. Robots' bodies are kept clear.
+  drawLabels(context) {
+    const index = new BoxIndex(64 * this.ratio);
+    const ratio = this.ratio;
+    const anchors = [];
+    this.robots.forEach((robot) => {
+      const at = this.where(robot);
+      if (!at) return;
+      const [cx, cy] = this.toScreen(at[0], at[1]);
+      const r = Math.max(this.reach(robot) * this.scale, 4 * ratio);
+      const keep = Math.min(r, 10 * ratio); // the middle of each robot stays in sight, however big it is drawn
+      index.add([cx - keep, cy - keep, 2 * keep, 2 * keep]);
+      anchors.push({ robot, cx, cy, r });
+    });
+    const rank = ({ robot }) => LABEL_RANK[robot.state] || 0;
+    anchors.sort((a, b) => rank(b) - rank(a) || a.robot.name.localeCompare(b.robot.name));
+    const placed = [];
     context.font = this.font(12, 700);
-    const width = context.measureText(label).width;
-    const box = [cx - width / 2 - 3 * this.ratio, top, width + 6 * this.ratio, 16 * this.ratio];
-    const covers = ([x, y, w, h]) => box[0] < x + w && x < box[0] + box[2] && box[1] < y + h && y < box[1] + box[3];
-    if (placed.some(covers)) return false;
-    placed.push(box);
-    context.fillStyle = "rgba(255,255,255,.88)";
-    context.fillRect(...box);
-    context.fillStyle = "#111";
-    context.fillText(label, cx - width / 2, top + 12 * this.ratio);
-    return true;
+    anchors.forEach(({ robot, cx, cy, r }) => {
+      const waiting = robot.waitingFor ? ` ⏸ waiting for ${robot.waitingFor}` : "";
+      const text = `${STATE_GLYPH[robot.state] || "•"} ${robot.name}${waiting}`;
+      const box = this.placeLabel(index, cx, cy, r, context.measureText(text).width + 6 * ratio, 16 * ratio);
+      if (box) placed.push({ id: robot.id, name: robot.name, text, box: box.box, leader: box.leader, anchor: [cx, cy], kind: "robot" });
+    });
+    context.font = this.font(12, 700);
+    this.locations.forEach((spot) => {
+      const [cx, cy] = this.toScreen(spot.x, spot.y);
+      const box = this.placeLabel(index, cx, cy, 6 * ratio, context.measureText(spot.name).width + 4 * ratio, 15 * ratio, [[1, 0], [-1, 0], [0, -1], [0, 1], [1, -1], [-1, -1], [1, 1], [-1, 1]]);
+      if (box) placed.push({ id: null, name: spot.name, text: spot.name, box: box.box, leader: box.leader, anchor: [cx, cy], kind: "location" });
+    });
+    placed.forEach((label) => this.drawLabel(context, label));
+    this.labels = placed.filter((label) => label.kind === "robot");
+    this.labelled = this.labels.map((label) => label.name);
+    this.locationLabels = placed.filter((label) => label.kind === "location").map((label) => label.name);
+  }
+
+  // The first box (w x h) on rings around (cx, cy) beyond radius r that is on the canvas and free; null if none.
+  placeLabel(index, cx, cy, r, w, h, directions = DIRECTIONS) {
+    const gap = 4 * this.ratio;
+    for (let ring = 0; ring < LABEL_RINGS; ring += 1) {
+      const distance = r + gap + ring * (h + gap);
+      for (const [dx, dy] of directions) {
+        const length = Math.hypot(dx, dy);
+        const [ux, uy] = [dx / length, dy / length];
+        // the box's side nearest the anchor sits at the distance along the direction
+        const bx = cx + ux * distance + (ux > 0.1 ? 0 : ux < -0.1 ? -w : -w / 2);
+        const by = cy + uy * distance + (uy > 0.1 ? 0 : uy < -0.1 ? -h : -h / 2);
+        const box = [bx, by, w, h];
+        if (bx < 0 || by < 0 || bx + w > this.canvas.width || by + h > this.canvas.height) continue;
+        if (index.hits(box)) continue;
+        index.add(box);
+        return { box, leader: ring > 0 || dx !== directions[0][0] || dy !== directions[0][1] };
+      }
+    }
+    return null;
+  }
+
+  drawLabel(context, label) {
+    const [x, y, w, h] = label.box;
+    const [ax, ay] = label.anchor;
+    if (label.leader) {
+      const [ex, ey] = [Math.min(Math.max(ax, x), x + w), Math.min(Math.max(ay, y), y + h)]; // nearest point of the box
+      context.strokeStyle = "#263238";
+      context.lineWidth = 1 * this.ratio;
+      context.beginPath(); context.moveTo(ax, ay); context.lineTo(ex, ey); context.stroke();
+    }
+    if (label.kind === "robot") {
+      context.fillStyle = "rgba(255,255,255,.9)";
+      context.fillRect(x, y, w, h);
+      context.font = this.font(12, 700);
+      context.fillStyle = "#111";
+      context.fillText(label.text, x + 3 * this.ratio, y + 12 * this.ratio);
+    } else {
+      context.font = this.font(12, 700);
+      context.lineWidth = 3 * this.ratio;
+      context.strokeStyle = "rgba(255,255,255,.9)";
+      context.strokeText(label.text, x + 2 * this.ratio, y + 11 * this.ratio);
+      context.fillStyle = "#263238";
+      context.fillText(label.text, x + 2 * this.ratio, y + 11 * this.ratio);
+    }
   }
 }

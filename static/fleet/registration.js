@@ -1,4 +1,5 @@
-// Registration: start it through the API, watch its progress live, reload to show new choices when done.
+// Registration: start it through the API, watch its progress live; when done, the robots, the choices to make and
+// the records are fetched again and swapped in, so the progress log stays.
 import { request, toast } from "./api.js";
 import { connectLive } from "./live.js";
 
@@ -10,6 +11,23 @@ function say(text, bad = false) {
   li.textContent = `${new Date().toLocaleTimeString()} ${text}`;
   if (bad) li.className = "error";
   progress.prepend(li);
+}
+
+// The parts of the page a registration changes, replaced by the same parts of a fresh copy of the page.
+const REFRESHED = ["#pending", "#reg-robots tbody", "#reg-records tbody"];
+
+async function refreshSections() {
+  try {
+    const response = await fetch(location.pathname, { headers: { Accept: "text/html" }, credentials: "same-origin" });
+    if (!response.ok) throw new Error(`HTTP ${response.status}`);
+    const fresh = new DOMParser().parseFromString(await response.text(), "text/html");
+    for (const selector of REFRESHED) {
+      const here = document.querySelector(selector), there = fresh.querySelector(selector);
+      if (here && there) here.replaceWith(document.adoptNode(there));
+    }
+  } catch (error) {
+    say(`could not refresh the lists (${error.message}); reload the page to see them`, true);
+  }
 }
 
 if (form) {
@@ -24,8 +42,8 @@ if (form) {
       (reply.results || []).forEach((result) => say(result.ok
         ? `${result.url}: registered ${result.robots.join(", ") || "no robot"}`
         : `${result.url}: failed: ${result.error}`, !result.ok));
-      say("done; reloading to show the robots and any choices to make");
-      setTimeout(() => location.reload(), 1500);
+      await refreshSections();
+      say("done: the robots, the choices to make and the records below are up to date");
     } catch (error) {
       say(`registration refused: ${error.message}`, true);
       toast(error.message, true);

@@ -1,5 +1,44 @@
-// The live robot table: rows keyed by robot id, updated from the snapshot and the deltas.
+// The live robot table: rows keyed by robot id, updated from the snapshot and the deltas; and the telemetry
+// words every page shows the same way (speed, battery, link round trip, last seen, the state shown).
 import { canControl, stateBadge } from "./api.js";
+
+const MOVING = 0.01; // m/s or rad/s: slower than this is standing
+
+// The state a person sees: "teleop" while a robot with no instruction (ready or registered) moves under a held
+// lease: nothing but a person's teleop drives it then.
+export const IDLE = ["ready", "registered"];
+export function shownState(robot) {
+  const pose = robot.pose || {};
+  const moving = Math.abs(pose.v || 0) > MOVING || Math.abs(pose.w || 0) > MOVING;
+  return IDLE.includes(robot.state) && robot.holder && moving ? "teleop" : robot.state;
+}
+
+// How long ago, in words, from an ISO string or unix seconds.
+export function ago(when) {
+  if (when == null || when === "") return "never";
+  const at = typeof when === "number" ? when * 1000 : Date.parse(when);
+  if (!Number.isFinite(at)) return "never";
+  const seconds = Math.max(0, Math.round((Date.now() - at) / 1000));
+  if (seconds < 60) return `${seconds} s ago`;
+  if (seconds < 3600) return `${Math.floor(seconds / 60)} min ago`;
+  return `${Math.floor(seconds / 3600)} h ago`;
+}
+
+// The freshest sign of life: the link's last_seen or the last pose's stamp.
+export function lastSeen(robot) {
+  const link = robot.last_seen ? Date.parse(robot.last_seen) / 1000 : 0;
+  const pose = robot.pose && robot.pose.t ? robot.pose.t : 0;
+  const latest = Math.max(link, pose);
+  return latest > 0 ? latest : null;
+}
+
+export const telemetry = {
+  speed: (robot) => (robot.pose && robot.pose.v != null ? `${Math.abs(robot.pose.v).toFixed(2)} m/s` : "–"),
+  battery: (robot) => (robot.pose && robot.pose.battery != null ? `${Math.round(robot.pose.battery)}%` : "–"),
+  rtt: (robot) => (robot.pose && robot.pose.rtt != null ? `${robot.pose.rtt < 10 ? robot.pose.rtt.toFixed(1) : Math.round(robot.pose.rtt)} ms` : "–"),
+  seen: (robot) => ago(lastSeen(robot)),
+  step: (robot) => (robot.instruction && robot.instruction.step ? `step ${robot.instruction.step} of ${robot.instruction.steps}` : ""),
+};
 
 export class RobotTable {
   constructor(tbody) {
@@ -61,7 +100,9 @@ export class RobotTable {
   }
 
   load(rows) {
-    const picked = new Set(this.selected().map((robot) => robot.id));
+    // the boxes ticked so far (also on the rows the server drew, before the first snapshot came)
+    const picked = new Set([...this.tbody.querySelectorAll("input.pick:checked")].map((box) => Number(box.value)));
+    rows.forEach((robot) => { if (robot.waiting_for !== undefined && robot.waitingFor === undefined) robot.waitingFor = robot.waiting_for; });
     this.robots = new Map(rows.map((robot) => [robot.id, robot]));
     this.tbody.replaceChildren(...rows.map((robot) => this.row(robot, picked.has(robot.id))));
     if (!rows.length) {
@@ -86,12 +127,43 @@ export class RobotTable {
     return robot;
   }
 
+  // A pose (with its battery and round trip when known): the telemetry cell and, when it changed, the badge.
   speed(id, pose) {
     const robot = this.robots.get(id);
     if (!robot) return;
-    robot.pose = pose;
+    const before = shownState(robot);
+    robot.pose = { ...(robot.pose || {}), ...pose };
     const cell = document.querySelector(`#robot-${id} .c-speed`);
-    if (cell) cell.textContent = `${Math.abs(pose.v).toFixed(2)} m/s`;
+    if (cell) cell.replaceChildren(this.telemetryCell(robot));
+    if (shownState(robot) !== before) this.update(id, {});
+  }
+
+  // Every few seconds: "last seen" words age.
+  tick() {
+    this.robots.forEach((robot) => {
+      const seen = document.querySelector(`#robot-${robot.id} .t-seen`);
+      if (seen) seen.textContent = telemetry.seen(robot);
+    });
+  }
+
+  telemetryCell(robot) {
+    const box = document.createElement("span");
+    box.className = "telemetry-cell";
+    const part = (className, text, title) => {
+      const span = document.createElement("span");
+      span.className = className;
+      span.textContent = text;
+      span.title = title;
+      return span;
+    };
+    box.append(part("t-speed", telemetry.speed(robot), "speed"));
+    if (robot.pose && robot.pose.battery != null) box.append(" · ", part("t-battery", telemetry.battery(robot), "battery"));
+    box.append(document.createElement("br"));
+    const muted = document.createElement("span");
+    muted.className = "muted";
+    muted.append(part("t-rtt", telemetry.rtt(robot), "link round trip"), " · ", part("t-seen", telemetry.seen(robot), "last seen"));
+    box.append(muted);
+    return box;
   }
 
   row(robot, picked) {
@@ -132,10 +204,12 @@ export class RobotTable {
     status.dataset.link = robot.link_status;
     status.textContent = robot.link_status;
     cell("c-link", status);
-    cell("c-state", stateBadge(robot.state));
-    const instruction = robot.instruction ? `#${robot.instruction.id} ${robot.instruction.text}` : "none";
-    cell("c-instruction", instruction);
-    cell("c-speed", robot.pose ? `${Math.abs(robot.pose.v).toFixed(2)} m/s` : "–");
+    cell("c-state", stateBadge(shownState(robot)));
+    const step = telemetry.step(robot);
+    const doing = robot.instruction ? `#${robot.instruction.id} ${robot.instruction.text}${step ? ` · ${step}` : ""}` : "none";
+    const waiting = robot.waitingFor ? ` · ⏸ waiting for ${robot.waitingFor}` : "";
+    cell("c-instruction", doing + waiting);
+    cell("c-speed", this.telemetryCell(robot));
     const held = document.createElement("span");
     held.className = "held";
     held.dataset.holder = robot.holder || "";

@@ -2,11 +2,18 @@
 
 from __future__ import annotations
 
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
 import pytest
 
 from tests.chaos.system import RunningSystem
 
 FIGURES: list[dict] = []  # one row per fault, printed at the end of the run (README "Fault survival")
+OUT = "FLEET_CHAOS_OUT"  # a JSON file for the rows as well (python -m bench.chaos sets it)
 
 
 @pytest.fixture(scope="module")
@@ -31,9 +38,20 @@ def figures():
 def pytest_terminal_summary(terminalreporter):
     if not FIGURES:
         return
+    if os.environ.get(OUT):
+        Path(os.environ[OUT]).write_text(json.dumps(_document(), indent=2) + "\n")
     columns = list(FIGURES[0])
     terminalreporter.section("fault survival (kill -9 of one process of `make run`)")
     terminalreporter.write_line("| " + " | ".join(columns) + " |")
     terminalreporter.write_line("|" + "---|" * len(columns))
     for row in FIGURES:
         terminalreporter.write_line("| " + " | ".join(str(row[column]) for column in columns) + " |")
+
+
+def _document() -> dict:
+    return {
+        "what": "kill -9 of one process of `make run` while the turtlebot drives an instruction (tests/chaos/)",
+        "when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+        "faults": FIGURES,
+    }

@@ -7,12 +7,16 @@ found and watched through the supervisor's RPC interface (what `supervisorctl` u
 from __future__ import annotations
 
 import http.cookiejar
+import itertools
+import json
+import math
 import os
 import pty
 import random
 import re
 import signal
 import socket
+import sqlite3
 import subprocess
 import threading
 import time
@@ -20,6 +24,8 @@ import urllib.error
 import urllib.parse
 import urllib.request
 import xmlrpc.client
+from collections import deque
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +40,7 @@ START_TIMEOUT = (
     180.0  # s for `make run` to have every process up and the portal answering (a loaded 2-core box)
 )
 STOP_TIMEOUT = 60.0
+LOGIN_TIMEOUT = 30.0  # s for the login page and form (a loaded machine; a page load's own limit is below)
 
 
 def free_port_block(count: int, attempts: int = 50) -> int:
@@ -91,6 +98,8 @@ class RunningSystem:
             "FLEET_PORT": str(self.port),
             "FLEET_SIM_PORT_BASE": str(self.sim_port_base),
             "FLEET_ADMIN_PASSWORD": PASSWORD,
+            # a robot at rest after a fault is then the portal's doing, not its base's cmd_vel timeout
+            "FLEET_SIM_OPTIONS": "--keep-last-command",
         }
 
     # ----- start and stop -----
@@ -177,7 +186,7 @@ class RunningSystem:
         """A logged-in session (the demo admin) whose redirects are not followed."""
         jar = http.cookiejar.CookieJar()
         opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(jar), _NoRedirect())
-        with opener.open(f"{self.url}login/", timeout=10) as page:
+        with opener.open(f"{self.url}login/", timeout=LOGIN_TIMEOUT) as page:
             token = re.search(rb'name="csrfmiddlewaretoken" value="([^"]+)"', page.read())[1].decode()
         form = urllib.parse.urlencode(
             {"username": "admin", "password": PASSWORD, "csrfmiddlewaretoken": token}
@@ -186,14 +195,39 @@ class RunningSystem:
             f"{self.url}login/", data=form.encode(), headers={"Referer": self.url}
         )
         try:
-            opener.open(request, timeout=10)
+            opener.open(request, timeout=LOGIN_TIMEOUT)
         except urllib.error.HTTPError as answer:
             assert answer.code == 302, f"login answered {answer.code}"
+        opener.csrf_token = next(cookie.value for cookie in jar if cookie.name == "csrftoken")
         return opener
 
-    def times_until(self, conditions: dict, timeout: float) -> list[float]:
-        """Seconds from now until each condition (named by what it waits for) first held, checked together."""
-        start, times = time.monotonic(), {}
+    # ----- instructions -----
+    def instruct(self, text: str) -> int:
+        """Submit an instruction as the console does without its socket (POST /api/instructions); its id."""
+        opener = self.browser()
+        headers = {"Content-Type": "application/json", "X-CSRFToken": opener.csrf_token, "Referer": self.url}
+        body = json.dumps({"text": text}).encode()
+        request = urllib.request.Request(f"{self.url}api/instructions", data=body, headers=headers)
+        with opener.open(request, timeout=60) as answer:
+            return json.loads(answer.read())["id"]
+
+    def instructions(self, where: str = "", *args) -> list[tuple[int, str, str]]:
+        """(id, status, outcome) of instructions, from the database itself (the web server may be the one
+        killed): `where` is an SQL condition on execution_instruction."""
+        database = f"file:{self.var_dir / 'fleet.sqlite3'}?mode=ro"
+        query = "SELECT id, status, outcome FROM execution_instruction" + (f" WHERE {where}" if where else "")
+        with closing(sqlite3.connect(database, uri=True, timeout=10)) as db:
+            return db.execute(query + " ORDER BY id", args).fetchall()
+
+    def instruction(self, pk: int) -> tuple[str, str]:
+        """(status, outcome) of one instruction."""
+        ((_, status, outcome),) = self.instructions("id = ?", pk)
+        return status, outcome
+
+    def times_until(self, conditions: dict, timeout: float, since: float | None = None) -> list[float]:
+        """Seconds from `since` (time.monotonic(); default now) until each condition (named by what it waits
+        for) first held, checked together."""
+        start, times = time.monotonic() if since is None else since, {}
         while len(times) < len(conditions) and time.monotonic() - start < timeout:
             for what, condition in conditions.items():
                 if what not in times and condition():
@@ -279,3 +313,117 @@ class Requests:
             return f"status {answer.code}"
         except OSError as exc:
             return f"{type(exc).__name__}: {exc}"
+
+
+@dataclass
+class Sample:
+    """One odometry message as the robot's endpoint sent it, stamped on arrival (time.monotonic())."""
+
+    at: float
+    x: float
+    y: float
+    yaw: float
+    vx: float
+    wz: float
+
+    def still(self) -> bool:
+        return abs(self.vx) < REST_SPEED and abs(self.wz) < REST_SPEED
+
+
+REST_SPEED = 1e-3  # m/s and rad/s: the odometry's twist (four decimals) reads zero
+REST_DRIFT = 0.01  # m the pose may wander while "at rest"
+
+
+class Odometry:
+    """A robot's own odometry, read from its simulated endpoint as any rosbridge client reads it, in a thread.
+
+    It follows the simulator through its restarts (connecting again until the endpoint answers), so what it
+    shows is what the robot does, whatever the portal believes.
+    """
+
+    def __init__(self, url: str, topic: str = "/odom") -> None:
+        self.url, self.topic = url, topic
+        self.samples: deque[Sample] = deque(maxlen=4000)  # 20 Hz: over three minutes
+        self.done = threading.Event()
+        self.thread = threading.Thread(target=self._run, name=f"odometry {url}", daemon=True)
+        self.thread.start()
+
+    def close(self) -> None:
+        self.done.set()
+        self.thread.join(timeout=5)
+
+    def _run(self) -> None:
+        from websockets.exceptions import WebSocketException
+        from websockets.sync.client import connect
+
+        subscribe = {"op": "subscribe", "topic": self.topic, "type": "nav_msgs/Odometry"}
+        while not self.done.is_set():
+            try:
+                with connect(self.url, open_timeout=2, close_timeout=1) as ws:
+                    ws.send(json.dumps(subscribe))
+                    while not self.done.is_set():
+                        try:
+                            raw = ws.recv(timeout=0.5)
+                        except TimeoutError:
+                            continue
+                        self._take(json.loads(raw))
+            except (OSError, WebSocketException, TimeoutError):
+                self.done.wait(0.1)  # the simulator is down: try again
+
+    def _take(self, frame: dict) -> None:
+        if frame.get("op") != "publish" or frame.get("topic") != self.topic:
+            return
+        try:
+            pose, twist = frame["msg"]["pose"]["pose"], frame["msg"]["twist"]["twist"]
+            z, w = pose["orientation"]["z"], pose["orientation"]["w"]
+            sample = Sample(
+                time.monotonic(),
+                float(pose["position"]["x"]),
+                float(pose["position"]["y"]),
+                2 * math.atan2(z, w),
+                float(twist["linear"]["x"]),
+                float(twist["angular"]["z"]),
+            )
+        except (KeyError, TypeError, ValueError):
+            return  # not an odometry message (the garbage test puts some on the topic): not the robot's
+        self.samples.append(sample)
+
+    def latest(self, fresh: float = 0.5) -> Sample | None:
+        """The last sample if it arrived within `fresh` s."""
+        last = self.samples[-1] if self.samples else None
+        return last if last is not None and time.monotonic() - last.at < fresh else None
+
+    def moving(self) -> bool:
+        last = self.latest()
+        return last is not None and not last.still()
+
+    def rested_since(self, hold: float = 1.0) -> float | None:
+        """When the robot came to rest (monotonic), if it has been at rest for `hold` s up to now: every sample
+        since shows a zero twist and a pose within REST_DRIFT of the first. None while it moves (or no odometry)."""
+        last = self.latest()
+        if last is None or not last.still():
+            return None
+        since = last
+        for sample in reversed(self.samples):
+            if not sample.still() or math.dist((sample.x, sample.y), (last.x, last.y)) > REST_DRIFT:
+                break
+            since = sample
+        return since.at if last.at - since.at >= hold else None
+
+    def travelled(self, after: float) -> float:
+        """Metres driven (odometry) since the moment `after` (monotonic)."""
+        points = [(sample.x, sample.y) for sample in self.samples if sample.at >= after]
+        steps = [math.dist(a, b) for a, b in itertools.pairwise(points)]
+        return sum(step for step in steps if step < 0.5)  # a longer one is a restarted simulator's new odom
+
+
+def send_frames(url: str, frames: list, period: float = 0.05) -> int:
+    """Send frames (text as is; anything else as JSON) to a rosbridge endpoint, one every `period` s, as one
+    client; how many were sent."""
+    from websockets.sync.client import connect
+
+    with connect(url, open_timeout=5, close_timeout=1) as ws:
+        for frame in frames:
+            ws.send(frame if isinstance(frame, str | bytes) else json.dumps(frame))
+            time.sleep(period)
+    return len(frames)

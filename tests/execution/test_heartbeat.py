@@ -51,3 +51,35 @@ def test_a_lock_taken_by_another_is_lost_for_good(lock):
 def test_lock_holders_reads_every_robot_in_one_round_trip(lock):
     assert coordination.lock_holders([1, 2]) == {1: lock.token, 2: None}
     assert coordination.lock_holders([]) == {}
+
+
+def test_redis_lost_under_a_command_loop_fails_the_step_as_executor_lost(lock, monkeypatch):
+    """No stop flag, preemption or lock can be seen without Redis: the step ends (its robot is then halted by
+    the runner) with a reason a person reads, not a connection error's."""
+    from types import SimpleNamespace
+
+    import redis
+
+    from execution.steps import REDIS_LOST, Interrupted, Session, run_step
+
+    def unreachable(*_args):
+        raise redis.ConnectionError("Error 111 connecting to redis.sock. Connection refused.")
+
+    heartbeat = coordination.Heartbeat(lock).start()
+    link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=SimpleNamespace(value=None))
+    session = Session(SimpleNamespace(pk=1), link, heartbeat)
+    monkeypatch.setattr(coordination, "flags", unreachable)
+    try:
+        with pytest.raises(Interrupted) as failure:
+            session.check()
+        assert failure.value.outcome == "failed" and failure.value.reason.startswith(REDIS_LOST)
+
+        # a Redis error from anywhere in a step's handler (e.g. releasing its route) says the same
+        monkeypatch.setattr("execution.steps.import_string", lambda _path: lambda *_args: unreachable())
+        with pytest.raises(Interrupted) as failure:
+            run_step(
+                session, {"action": "move", "robots": ["tb"], "destination": {"name": "X", "x": 1, "y": 0}}
+            )
+        assert failure.value.reason.startswith(REDIS_LOST)
+    finally:
+        heartbeat.stop()

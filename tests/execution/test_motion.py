@@ -136,3 +136,25 @@ def test_navigation_goal_messages():
     assert motion.move_base_outcome(status, "g1") == "active"
     assert motion.move_base_outcome(status, "g0") == "succeeded"
     assert motion.move_base_outcome(status, "g9") is None
+
+
+@pytest.mark.parametrize(("start", "goal"), [(0.0, 1.5), (0.3, -2.8), (3.0, -3.0), (-1.0, -1.0)])
+def test_face_turns_the_short_way_to_the_heading_and_stops(start, goal):
+    controller = motion.Face(goal, TB3)
+    (_, _, yaw), commands = simulate(controller, (1.0, 2.0, start))
+    assert abs(geometry.wrap(yaw - goal)) <= controller.tolerance + 0.01
+    assert all(c.v == 0.0 for c in commands)
+    turns = {math.copysign(1, c.w) for c in commands if c.w}
+    assert len(turns) <= 1  # one way round, never back and forth
+    if turns:
+        assert turns == {math.copysign(1, geometry.wrap(goal - start))}  # the short way
+
+
+def test_a_destination_keeps_its_heading_and_refuses_a_bad_one():
+    from fleetcore.steps import Destination
+
+    assert Destination.from_dict({"name": "", "x": 1, "y": 2, "yaw": 1.5}).yaw == 1.5
+    assert Destination.from_dict({"name": "A", "x": 1, "y": 2}).yaw is None
+    for bad in ("north", float("nan"), True):
+        with pytest.raises(StepError, match="yaw"):
+            Destination.from_dict({"name": "", "x": 1, "y": 2, "yaw": bad})

@@ -88,6 +88,23 @@ def test_the_map_is_told_the_route_and_whom_a_robot_waits_for(robots, monkeypatc
     assert payloads[1]["path"] is None and payloads[1]["waiting_for"] == "b"
 
 
+def test_a_map_that_opens_now_gets_the_reserved_routes_and_the_waits(robots):
+    from portal.snapshots import robot_rows
+
+    a, b, c = robots["a"], robots["b"], robots["c"]
+    traffic.plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
+    traffic._put(traffic.coordination.connection(), "waits", b.pk, {"for": a.pk, "expires": 1e12})
+    rows = {row["name"]: row for row in robot_rows([a, b, c])}
+    route = rows["a"]["route"]
+    assert route[0] == [-2.0, 0.0] and route[-1] == [2.0, 0.0] and len(route) <= traffic.MAP_POINTS + 2
+    assert rows["a"]["waiting_for"] is None and rows["b"]["waiting_for"] == "a"
+    assert "route" not in rows["c"]  # not under traffic
+    assert robot_rows([b])[0]["waiting_for"] == "a"  # named though not among the rows
+    traffic.release(a, (2.0, 0.0, 0.0))
+    traffic.coordination.connection().hdel(traffic._key("waits"), str(b.pk))
+    assert "route" not in robot_rows([a])[0]
+
+
 def test_stretches_are_short_and_keep_the_planned_waits():
     path = [(0.0, 0.0, 0.0), (3.0, 0.0, 10.0), (3.0, 0.0, 12.0), (3.0, 1.0, 15.0)]
     legs = traffic.stretches(path)

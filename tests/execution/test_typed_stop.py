@@ -14,7 +14,7 @@ from robots.rosbridge import sync
 from robots.rosbridge.errors import LinkDown
 from tests.execution.helpers import wait_for
 
-pytestmark = [pytest.mark.timeout(60), pytest.mark.slow]
+pytestmark = [pytest.mark.timeout(60), pytest.mark.slow, pytest.mark.usefixtures("seeded_ontology")]
 
 
 class Silent:

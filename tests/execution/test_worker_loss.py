@@ -19,7 +19,7 @@ import pytest
 from django.db import connection
 
 from alerts.models import Alert
-from execution import coordination, watchdog
+from execution import coordination, traffic, watchdog
 from execution.instructions import submit
 from execution.models import Execution, Instruction
 from tests.execution.helpers import (
@@ -130,6 +130,8 @@ def test_killed_worker_leaves_the_robot_at_rest_and_the_instruction_failed(
     """The whole worker (parent and pool) is killed: only the scheduler process is left to stop the robot."""
     sim = turtle_world
     instruction, execution = start_moving(sim, fleet_admin)
+    route = traffic.routes([execution.robot_id])[execution.robot_id]["path"]
+    assert route  # its route is reserved while it drives
     os.killpg(celery_worker.pid, signal.SIGKILL)
     killed_at = sim.call(lambda: sim.fleet.physics.time)
     killed = time.monotonic()
@@ -143,6 +145,7 @@ def test_killed_worker_leaves_the_robot_at_rest_and_the_instruction_failed(
     lost = Alert.objects.open().filter(kind="executor_lost")
     wait_for(lost.exists, timeout=5, what="the executor_lost alert (raised after the settle)")
     assert lost.get().robot.name == "turtlebot" and f"#{instruction.pk}" in lost.get().message
+    assert traffic.routes([execution.robot_id]) == {}  # nobody renews its route: dropped, not left to lapse
     parked = sim.pose("turtlebot")
     wait_for(lambda: sim.call(lambda: sim.fleet.physics.time) > killed_at + 4.0, timeout=10, what="a while")
     assert math.dist(sim.pose("turtlebot")[:2], parked[:2]) < 0.01  # and it stays at rest

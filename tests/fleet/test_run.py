@@ -163,3 +163,9 @@ def test_the_single_host_supervisord_config_restarts_every_role():
     assert set(programs_by_role) == ROLES
     for role, program in programs_by_role.items():
         assert program["autorestart"] == "true" and int(program["startretries"]) >= 100, role
+
+
+def test_the_simulator_takes_more_options_from_the_environment(tmp_path):
+    environ = {"FLEET_VAR_DIR": str(tmp_path), "FLEET_SIM_OPTIONS": "--keep-last-command --extra 2"}
+    (sim,) = [program for program in programs(Setup.from_env(environ)) if program.name == "sim"]
+    assert sim.command[-3:] == ["--keep-last-command", "--extra", "2"]

@@ -24,8 +24,20 @@ def summary(result: dict) -> dict:
         "type": result["type"],
         "needs_user": "yes" if result["needs_user"] else "no",
         "action": first.get("action") or "-",
-        "robots": robots if isinstance(robots, str) else ",".join(robots),
+        "robots": _robots(robots),
         "destination": (first.get("destination") or {}).get("name", "-"),
         "task": first.get("task") or "-",
         "steps": str(len(result["steps"])),
     }
+
+
+def _robots(robots) -> str:
+    """ "any", "all", "husky,tiago", or a subject object in words: "any turtlebot", "all except husky"."""
+    if isinstance(robots, str):
+        return robots
+    if isinstance(robots, dict):
+        words = ["all" if robots.get("all") else "any"]
+        words += [robots["model"]] if robots.get("model") else []
+        words += [f"except {'+'.join(robots['except'])}"] if robots.get("except") else []
+        return " ".join(words)
+    return ",".join(robots)

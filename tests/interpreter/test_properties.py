@@ -4,14 +4,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from fleetcore.steps import validate
 from interpreter.lessons import parse_answer
 from interpreter.parser import interpret
 
 WORDS = st.sampled_from(
     ["move", "husky", "to", "A", "then", "and", "clean", "rotate", "5", "times", "(2, -1)", "x", "y", "all",
-     "turtlebots", "sea", "roof", "shift", "slowly", ",", ".", "room", "1", "stop", "the", "mvoe"]
+     "turtlebots", "sea", "roof", "shift", "slowly", ",", ".", "room", "1", "stop", "the", "mvoe", "wait",
+     "seconds", "2m", "patrol", "until stopped", "repeat", "except", "a", "forward", "back", "left", "degrees",
+     "don't", "twice", "three", "where is", "how far", "from", "any"]
 )  # fmt: skip
-SHAPE = {"type", "valid", "needs_user", "question", "steps", "synonyms_used", "reason"}
+SHAPE = {"type", "valid", "needs_user", "question", "steps", "synonyms_used", "reason", "answer_example"}
+STEP = {"action", "robots", "destination", "task", "speed"}
 
 
 def check_shape(result: dict) -> None:
@@ -19,9 +23,12 @@ def check_shape(result: dict) -> None:
     assert result["type"] in {"I", "II", "III", "IV", "V"}
     assert result["valid"] == (result["type"] in {"I", "II"}) == (not result["needs_user"])
     assert (result["question"] is None) == result["valid"]
+    assert (result["answer_example"] is None) or not result["valid"]
     for step in result["steps"]:
-        assert set(step) == {"action", "robots", "destination", "task", "speed"}
-        assert step["robots"] in ("all", "any") or isinstance(step["robots"], list)
+        assert STEP <= set(step) <= STEP | {"amount", "span"}
+        assert step["robots"] in ("all", "any") or isinstance(step["robots"], list | dict)
+    if result["valid"] and result["steps"]:
+        validate(result["steps"])  # whatever the interpreter calls understood, the step contract accepts
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -1,8 +1,22 @@
 """A running demo fleet for the end-to-end browser tests and the screenshots: simulated world + pose stream."""
 
 import asyncio
+import os
 import threading
 from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+SCREENSHOTS = Path(__file__).resolve().parents[2] / "docs" / "screenshots"
+SCREENSHOT_MARKS = [  # the screenshot modules: written on demand only (they overwrite docs/screenshots)
+    pytest.mark.browser,
+    pytest.mark.slow,
+    pytest.mark.timeout(180),
+    pytest.mark.skipif(
+        not os.environ.get("FLEET_SCREENSHOTS"), reason="set FLEET_SCREENSHOTS=1 to write them"
+    ),
+]
 
 DEMO_KEYS = ("robots", "namespaced", "turtlebot", "husky", "tiago")  # "robots": the namespaced endpoint
 

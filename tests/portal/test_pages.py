@@ -53,7 +53,7 @@ def test_robot_page_shows_bindings_topics_facts_and_the_holder(client_for, viewe
     assert "/cmd_vel" in page and "exact" in page
     assert "needs a person" in page
     assert "/odom_raw" in page
-    assert "wheels" in page
+    assert "<dt>Wheels</dt><dd>2</dd>" in page  # a fact of its description, labelled in words
     assert "held by otto" in page
 
 
@@ -132,3 +132,30 @@ def test_audit_page_is_for_admins_only(client_for, viewer, operator, fleet_admin
 def test_audit_link_only_in_the_admin_menu(client_for, operator, fleet_admin, db):
     assert 'href="/audit/"' not in client_for(operator).get("/").content.decode()
     assert 'href="/audit/"' in client_for(fleet_admin).get("/").content.decode()
+
+
+def test_robot_page_facts_are_words_not_python(client_for, viewer, fleet):
+    robot = fleet["turtlebot"]
+    robot.description = {
+        "wheel_joints": ["wheel_left_joint", "wheel_right_joint"], "urdf_error": "", "drive": "wheeled",
+        "wheel_count": 2, "limits_source": "catalog", "footprint": [[0.1, 0.1]], "joint_count": 3,
+    }  # fmt: skip
+    robot.drive = "wheeled"
+    robot.save()
+    page = client_for(viewer).get(reverse("robot-detail", args=[robot.pk])).content.decode()
+    facts = page[page.index('id="facts-title"') : page.index('id="bindings-title"')]
+    assert "<dt>Wheel joints</dt><dd>wheel_left_joint, wheel_right_joint</dd>" in facts
+    assert "<dt>Joints</dt><dd>3</dd>" in facts
+    assert "[" not in facts and "urdf" not in facts.lower()  # no Python lists, no empty URDF problem
+    assert facts.lower().count("<dt>drive</dt>") == 1
+
+
+def test_robot_page_names_its_camera_and_scan_topics(client_for, viewer, fleet):
+    robot = fleet["turtlebot"]
+    robot.topics.create(name="/camera/image/compressed", type="sensor_msgs/CompressedImage")
+    robot.topics.create(name="/scan", type="sensor_msgs/LaserScan")
+    page = client_for(viewer).get(reverse("robot-detail", args=[robot.pk])).content.decode()
+    assert 'id="camera"' in page and "<code>/camera/image/compressed</code>" in page
+    assert "laser scan <code>/scan</code>" in page
+    plain = client_for(viewer).get(reverse("robot-detail", args=[fleet["husky"].pk])).content.decode()
+    assert 'id="camera"' not in plain

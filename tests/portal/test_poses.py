@@ -135,3 +135,18 @@ async def test_stream_endpoint_subscribes_with_throttle_and_feeds_callbacks():
     assert seen_ops[0]["op"] == "subscribe" and seen_ops[0]["throttle_rate"] == 100
     assert seen_ops[0]["type"] == "nav_msgs/Odometry"
     assert hub.take_batch() == []
+
+
+def test_battery_and_round_trip_ride_along_with_each_pose():
+    hub = PoseHub(publish=Sink())
+    hub.on_battery(1, {"percentage": 0.42})  # before any pose: kept for the first one
+    hub.on_odometry(1, odometry(0, 0, 0))
+    hub.on_round_trip([1, 2], 0.0123)
+    [pose] = hub.take_batch()
+    assert (pose["battery"], pose["rtt"]) == (42.0, 12.3)
+    hub.on_battery(1, {"percentage": 87.0})  # some drivers publish percent
+    hub.on_battery(1, {"percentage": float("nan")})  # "not measured": ignored
+    [pose] = hub.take_batch()
+    assert pose["battery"] == 87.0 and pose["x"] == 0.0
+    hub.on_odometry(2, odometry(1, 0, 0))
+    assert hub.take_batch()[0]["rtt"] == 12.3

@@ -1,21 +1,9 @@
 """Screenshots of the dashboard, the console and a robot page for the README (FLEET_SCREENSHOTS=1 to write them)."""
 
-import os
-from pathlib import Path
+from tests.portal.demo import SCREENSHOT_MARKS, SCREENSHOTS, demo_urls, demo_world, pose_stream
 
-import pytest
-
-from tests.portal.demo import demo_urls, demo_world, pose_stream
-
-OUT = Path(__file__).resolve().parents[2] / "docs" / "screenshots"
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.slow,
-    pytest.mark.timeout(180),
-    pytest.mark.skipif(
-        not os.environ.get("FLEET_SCREENSHOTS"), reason="set FLEET_SCREENSHOTS=1 to write them"
-    ),
-]
+OUT = SCREENSHOTS
+pytestmark = SCREENSHOT_MARKS
 
 
 def test_write_screenshots(seeded_terms, login, fleet_admin, live_url, monkeypatch):

@@ -192,3 +192,19 @@ def test_a_bad_click_to_move_names_the_field(client_for, operator, fleet, body, 
     reply = client_for(operator).post("/api/instructions", body, content_type="application/json")
     assert reply.status_code == 422
     assert field in str(reply.json()["detail"])
+
+
+def test_a_goal_dragged_on_the_map_keeps_its_heading(client_for, operator, fleet, monkeypatch):
+    from execution import dispatch
+    from execution.models import Instruction
+
+    monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)  # stored, not run
+    body = {"robot_ids": [fleet["turtlebot"].pk], "destination": {"x": 0.5, "y": 0.4, "yaw": 1.57}}
+    reply = client_for(operator).post("/api/instructions", body, content_type="application/json")
+    assert reply.status_code == 201, reply.content
+    step = Instruction.objects.get(pk=reply.json()["id"]).parse["steps"][0]
+    assert step["destination"] == {"name": "", "x": 0.5, "y": 0.4, "yaw": 1.57}
+    assert "facing 90°" in reply.json()["text"]
+    bad = {"robot_ids": [fleet["turtlebot"].pk], "destination": {"x": 0.5, "y": 0.4, "yaw": 99}}
+    reply = client_for(operator).post("/api/instructions", bad, content_type="application/json")
+    assert reply.status_code == 422 and "yaw" in str(reply.json()["detail"])

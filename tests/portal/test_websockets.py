@@ -366,3 +366,74 @@ async def test_presses_that_come_together_are_checked_in_one_call(operator, flee
     assert replies["husky"]["ok"] is False and "no move topic" in replies["husky"]["detail"]
     assert calls == [sorted([turtlebot.pk, husky.pk])]
     await communicator.disconnect()
+
+
+class FakeFeedLink:
+    """A rosbridge link that records subscriptions and lets the test deliver messages on them."""
+
+    def __init__(self):
+        self.subs, self.dropped = [], []
+
+    async def subscribe(self, topic, type_, callback, throttle_rate=0, queue_length=0):
+        self.subs.append((topic, type_, callback, throttle_rate))
+        return topic
+
+    async def unsubscribe(self, sub):
+        self.dropped.append(sub)
+
+
+async def test_a_robot_page_follows_its_scan_and_camera_and_drops_them_when_closed(
+    viewer, fleet, monkeypatch
+):
+    link = FakeFeedLink()
+
+    async def get(url):
+        return link
+
+    monkeypatch.setattr("robots.rosbridge.pool.get", get)
+    robot = fleet["turtlebot"]
+    await sync_to_async(robot.topics.create)(name="/cam/compressed", type="sensor_msgs/CompressedImage")
+    await sync_to_async(robot.topics.create)(name="/scan", type="sensor_msgs/LaserScan")
+    communicator = await _connect(f"/ws/robots/{robot.pk}/", viewer)
+    assert (await communicator.receive_json_from(timeout=5))["type"] == "snapshot"
+    for _ in range(100):  # the feeds start once the snapshot is out
+        if len(link.subs) == 2:
+            break
+        await asyncio.sleep(0.05)
+    assert sorted((topic, rate) for topic, _type, _cb, rate in link.subs) == [
+        ("/cam/compressed", 500),
+        ("/scan", 500),
+    ]
+    callbacks = {topic: callback for topic, _type, callback, _rate in link.subs}
+    callbacks["/scan"]({"angle_min": -1.0, "angle_increment": 0.5, "range_min": 0.1, "range_max": 3.5,
+                        "ranges": [1.23456, None, 2.0]})  # fmt: skip
+    scan = await communicator.receive_json_from(timeout=5)
+    assert scan["type"] == "robot.scan" and scan["scan"]["ranges"] == [1.235, None, 2.0]
+    callbacks["/cam/compressed"]({"format": "png", "data": "iVBORw0KGgo="})
+    frame = await communicator.receive_json_from(timeout=5)
+    assert (frame["type"], frame["format"], frame["data"]) == ("robot.camera", "png", "iVBORw0KGgo=")
+    await communicator.disconnect()
+    assert sorted(link.dropped) == ["/cam/compressed", "/scan"]
+
+
+async def test_the_dashboard_watches_one_robots_scan_at_a_time(viewer, fleet, monkeypatch):
+    link = FakeFeedLink()
+
+    async def get(url):
+        return link
+
+    monkeypatch.setattr("robots.rosbridge.pool.get", get)
+    for robot in fleet.values():
+        await sync_to_async(robot.topics.create)(name="/scan", type="sensor_msgs/LaserScan")
+    communicator = await _connect("/ws/fleet/", viewer)
+    await communicator.receive_json_from(timeout=5)
+    await communicator.send_json_to({"command": "watch", "robot": fleet["turtlebot"].pk})
+    await communicator.send_json_to({"command": "watch", "robot": fleet["husky"].pk})
+    await communicator.send_json_to({"command": "watch", "robot": "husky"})
+    assert "robot" in (await communicator.receive_json_from(timeout=5))["detail"]  # a bad id is answered
+    assert len(link.subs) == 2 and link.dropped == [
+        "/scan"
+    ]  # the first robot's scan was dropped for the second
+    await communicator.send_json_to({"command": "watch", "robot": None})
+    await communicator.disconnect()
+    assert link.dropped == ["/scan", "/scan"]

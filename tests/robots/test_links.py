@@ -172,3 +172,31 @@ async def test_a_link_outlives_bad_frames_and_reconnects_after_garbage():
         finally:
             manager.stop()
             await asyncio.wait_for(task, 10)
+
+
+async def test_battery_messages_reach_the_database_only_when_a_robots_charge_changes_class(monkeypatch):
+    """100 robots' batteries every 10 s were 10 transactions a second per 100 robots; only a change of class
+    (the first message, low, ok again) needs one."""
+    from robots import links
+
+    checked = []
+    monkeypatch.setattr(links, "check_battery", lambda robot_id, message: checked.append((robot_id, message)))
+
+    class Client:
+        callbacks = {}
+
+        async def subscribe(self, topic, type_, callback, throttle_rate=0):
+            self.callbacks[topic] = callback
+
+    client = Client()
+    robots = [
+        {"id": pk, "bindings": {"battery": (f"/r{pk}/battery", "sensor_msgs/BatteryState")}} for pk in (1, 2)
+    ]
+    await links.battery_hook(client, robots)
+    one, two = client.callbacks["/r1/battery"], client.callbacks["/r2/battery"]
+    for charge in (0.9, 0.8, 0.7, 0.25, 0.1, 0.12, 0.9, float("nan")):
+        one({"percentage": charge})
+    two({"percentage": 50})
+    await asyncio.gather(*links._BATTERY_CHECKS)
+    # (the checks run in threads: their order is not the messages')
+    assert sorted((pk, m["percentage"]) for pk, m in checked) == [(1, 0.1), (1, 0.9), (1, 0.9), (2, 50)]

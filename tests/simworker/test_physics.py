@@ -92,3 +92,14 @@ def test_a_robot_at_a_wall_is_no_contact(physics):
     husky = physics.add_robot("h", model("husky"), -4.0, -1.0, math.pi)
     run(physics, 6.0, husky, (1.0, 0.0))
     assert husky.pose()[0] < -5.4 and physics.contacts == []
+
+
+def test_a_fleet_that_keeps_the_last_command_drives_on_without_one():
+    """`simworker --keep-last-command`: bases without a cmd_vel timeout, for the chaos tests."""
+    from simworker.fleet import SimFleet
+
+    fleet = SimFleet("paper", endpoints=["turtlebot"], keep_last_command=True)
+    tb = fleet.physics.robots["turtlebot"]
+    tb.command(0.2, 0.0)
+    run(fleet.physics, 1.0)
+    assert tb.twist()[0] == pytest.approx(0.2)  # still driving long after the model's 0.5 s timeout

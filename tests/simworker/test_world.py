@@ -66,6 +66,26 @@ def test_extra_robots_are_placed_on_free_cells_apart(world):
     assert min(math.dist(a, b) for i, a in enumerate(points) for b in points[i + 1 :]) >= 0.44
 
 
+def test_shards_of_extra_robots_together_are_the_unsplit_world():
+    """Two simulator shards (--extra 30 --extra-skip 0, then 30) serve what one world of 60 would: no robot's
+    name or cell twice (issue 19's cluster)."""
+    whole = [(r.name, r.x, r.y) for r in load_world("paper").add_extra_robots(60)]
+    first = [(r.name, r.x, r.y) for r in load_world("paper").add_extra_robots(30, skip=0)]
+    second = [(r.name, r.x, r.y) for r in load_world("paper").add_extra_robots(30, skip=30)]
+    assert first + second == whole
+    assert second[0][0] == "robot35"
+    with pytest.raises(WorldFormatError, match="fits at most"):
+        load_world("paper").add_extra_robots(30, skip=10_000)
+
+
+def test_a_tighter_grid_packs_a_thousand_robots_apart_on_free_cells():
+    fresh = load_world("paper")
+    extra = fresh.add_extra_robots(1000, spacing=0.3)
+    assert len({r.name for r in extra}) == 1000 and all(fresh.map.is_free(r.x, r.y) for r in extra)
+    points = [(r.x, r.y) for r in extra]
+    assert min(math.dist(a, b) for i, a in enumerate(points) for b in points[i + 1 :]) >= 0.29
+
+
 def test_bad_world_files_are_refused(tmp_path):
     (tmp_path / "world.yaml").write_text("name: x\n")
     with pytest.raises(WorldFormatError, match="map"):

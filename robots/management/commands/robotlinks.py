@@ -22,8 +22,7 @@ def world_endpoints(name: str, host: str, port_base: int) -> list[str]:
         world = load_world(name)
     except (OSError, WorldFormatError) as exc:
         raise CommandError(str(exc)) from exc
-    used = {r.endpoint for r in world.robots}
-    return [f"ws://{host}:{port_base + ep.port_offset}" for ep in world.endpoints if ep.key in used]
+    return world.robot_endpoint_urls(host, port_base)
 
 
 class Command(BaseCommand):

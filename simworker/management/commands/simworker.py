@@ -17,9 +17,29 @@ class Command(BaseCommand):
         parser.add_argument(
             "--extra", type=int, default=0, help="extra namespaced robots on the extra endpoint"
         )
+        parser.add_argument(
+            "--extra-skip",
+            type=int,
+            default=0,
+            help="a shard's slice of the extra robots: leave out this many first (names and places)",
+        )
+        parser.add_argument(
+            "--extra-spacing",
+            type=float,
+            help="metres between extra robots (the world's own grid by default)",
+        )
+        parser.add_argument(
+            "--endpoints", help="serve only these endpoints (comma-separated keys, e.g. extra): a shard"
+        )
         parser.add_argument("--host", default="127.0.0.1")
         parser.add_argument("--port-base", type=int, default=9090, help="port of endpoint offset 0")
         parser.add_argument("--time-scale", type=float, default=1.0, help="simulated seconds per wall second")
+        parser.add_argument(
+            "--keep-last-command",
+            action="store_true",
+            help="robots drive on with their last velocity command for ever, as bases without a cmd_vel "
+            "timeout do (the chaos tests: a robot at rest after a fault is then the portal's doing)",
+        )
 
     def handle(self, *args, **opts):
         if opts["extra"] < 0:
@@ -31,7 +51,11 @@ class Command(BaseCommand):
                 opts["port_base"],
                 opts["extra"],
                 opts["time_scale"],
+                opts["keep_last_command"],
                 out=lambda line: self.stdout.write(line),
+                endpoints=opts["endpoints"].split(",") if opts["endpoints"] else None,
+                extra_skip=opts["extra_skip"],
+                extra_spacing=opts["extra_spacing"],
             )
         except (OSError, ValueError, KeyError) as exc:
             raise CommandError(str(exc)) from exc

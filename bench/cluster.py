@@ -1,0 +1,454 @@
+"""The fleet across hosts (issue 19): figures from a cluster of network namespaces on this machine.
+
+    sudo .venv/bin/python -m bench.cluster --robots 100 [--clients 50] [--rounds 10]
+    sudo .venv/bin/python -m bench.cluster --report        (summary.json, REPORT.md, cost_curve.png again)
+
+Brings up deploy/cluster.py's cluster with --robots split over its two simulator shards, then, from the machine
+itself (the bridge's 10.77.0.1), measures what issue 19 sets goals for:
+
+- registration_s: both shards' endpoints registered in bulk through web1's API (POST /api/robots/register,
+  queued, run by a control worker) until both records are finished; online_s until the links host has every
+  robot online.
+- commands: every robot turned by teleop over the dashboard's socket (/ws/fleet/, alternately on web1 and web2),
+  `rounds` times, all robots moving; latency = the command sent -> the same command (its angular speed) seen on the
+  robot's cmd_vel at its shard (subscribed over the shard's rosbridge, so one relay hop more than the robot has).
+- stop-all: the dashboard's STOP ({"command": "stop"} with every robot) while all turn -> the first zero Twist at
+  each robot; p99 over robots and the time to the last robot, per trial.
+- live: `clients` browser-like WebSocket clients (logged in by cookie, half on each web host) reading
+  fleet.poses while every robot turns: robots each client saw, the pose rate per robot per client (Hz), and the
+  staleness of each pose (received - its odometry stamp; one clock, one machine).
+- cpu: CPU seconds per wall second of every process of each host during the measurements, and per robot.
+
+Each size writes size-N.json under bench/results/cluster/; summary.json, REPORT.md and cost_curve.png are made
+from all the sizes there. The client processes share the machine's cores with the cluster, so every figure
+includes the load the measuring adds; the machine's load average at the start is recorded with them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+from bench import report as report_file
+from deploy.cluster import Cluster, down, host_pids, reason_unavailable
+from deploy.cluster_client import Portal
+from experiments.stats import summarize
+
+DECODED = 5  # dashboards that decode every pose (robots seen, staleness); the rest count poses per batch
+LIVE_S = 12.0  # seconds the dashboards read poses, while every robot turns
+OUT = Path(__file__).resolve().parent / "results" / "cluster"
+GOALS = {  # issue 19, for 1,000 robots
+    "registration_s": 10.0,
+    "live_hz": 5.0,
+    "staleness_p99_ms": 150.0,
+    "command_p99_ms": 50.0,
+    "stop_all_p99_ms": 100.0,
+}
+
+
+def cpu_seconds() -> dict[str, float]:
+    """CPU seconds used so far by every process of each host (the namespace's processes)."""
+    import psutil
+
+    used = {}
+    for host in ("db", "web1", "web2", "exec1", "exec2", "sim1", "sim2", "links"):
+        total = 0.0
+        for pid in host_pids(host):
+            try:
+                times = psutil.Process(pid).cpu_times()
+                total += times.user + times.system
+            except psutil.Error:
+                pass
+        used[host] = total
+    return used
+
+
+class Reception:
+    """Every Twist each robot's cmd_vel carried, with the time it reached us, from the shards' rosbridge."""
+
+    def __init__(self, shards: dict[str, list[str]]) -> None:
+        self.shards = shards
+        self.times: dict[str, list[tuple[float, float]]] = defaultdict(list)  # name -> (t, angular z)
+        self.ready = asyncio.Event()
+        self._subscribed = 0
+
+    async def run(self, stop: asyncio.Event) -> None:
+        await asyncio.gather(*(self._follow(url, names, stop) for url, names in self.shards.items()))
+
+    async def _follow(self, url: str, names: list[str], stop: asyncio.Event) -> None:
+        import websockets
+
+        async with websockets.connect(url, max_size=None) as ws:
+            for name in names:
+                message = {"op": "subscribe", "topic": f"/{name}/cmd_vel", "type": "geometry_msgs/Twist"}
+                await ws.send(json.dumps(message))
+            self._subscribed += 1
+            if self._subscribed == len(self.shards):
+                self.ready.set()
+            while not stop.is_set():
+                try:
+                    raw = await asyncio.wait_for(ws.recv(), 0.5)
+                except TimeoutError:
+                    continue
+                now = time.time()
+                message = json.loads(raw)
+                if message.get("op") == "publish":
+                    name = message["topic"].split("/")[1]
+                    self.times[name].append((now, float(message["msg"]["angular"]["z"])))
+
+    def first(self, name: str, since: float, angular: float) -> float | None:
+        for t, z in self.times.get(name, ()):
+            if t >= since and abs(z - angular) < 1e-6:
+                return t
+        return None
+
+
+async def connect(url: str, cookie: str):
+    import websockets
+
+    ws_url = url.replace("http://", "ws://") + "ws/fleet/"
+    origin = url.rstrip("/")
+    return await websockets.connect(
+        ws_url, additional_headers={"Cookie": f"sessionid={cookie}", "Origin": origin}, max_size=None
+    )
+
+
+async def browser(url: str, cookie: str, seen: dict, stale: list[float] | None, live: dict) -> None:
+    """One dashboard: every fleet.poses batch it is pushed while live["on"], counted per robot, with each pose's
+    staleness; live["connected"] counts the dashboards connected so far.
+
+    Only the dashboards given `stale` read every pose (robots seen, staleness); the others count the poses of each
+    batch without decoding it (seen["poses"], seen["batches"]): the server does the same work for every socket,
+    and one client process could not decode 50 sockets' worth of poses on this machine."""
+    async with await connect(url, cookie) as ws:
+        live["connected"] += 1
+        while not live["stop"].is_set():
+            try:
+                raw = await asyncio.wait_for(ws.recv(), 0.5)
+            except TimeoutError:
+                continue
+            if not live["on"] or '"fleet.poses"' not in raw:
+                continue
+            if stale is None:
+                seen["batches"] += 1
+                seen["poses"] += raw.count('"id":')
+                continue
+            now = time.time()
+            for pose in json.loads(raw).get("poses", []):
+                seen[pose["id"]] += 1
+                if pose.get("t"):
+                    stale.append((now - pose["t"]) * 1000)
+
+
+def browsers(webs: list[str], cookie: str, clients: int, robots: int, seconds: float, pipe) -> None:
+    """`clients` dashboards, in a process of their own (so that reading every pose does not delay the timing of
+    commands): says when all are connected, reads for `seconds`, then sends back robots seen, pose rate and
+    staleness per client, and connection errors."""
+
+    async def main() -> dict:
+        live = {"stop": asyncio.Event(), "on": False, "connected": 0}
+        seen = [defaultdict(int) for _ in range(clients)]
+        stale: list[float] = []
+        start = time.monotonic()
+        tasks = [
+            asyncio.create_task(browser(webs[i % 2], cookie, seen[i], stale if i < DECODED else None, live))
+            for i in range(clients)
+        ]
+        while (
+            live["connected"] < clients
+            and time.monotonic() - start < 120
+            and not all(t.done() for t in tasks)
+        ):
+            await asyncio.sleep(0.1)
+        connect_s = time.monotonic() - start
+        await asyncio.sleep(1.0)  # past the snapshots
+        pipe.send({"connected": live["connected"]})
+        live["on"], began = True, time.monotonic()
+        await asyncio.sleep(seconds)
+        live["on"], took = False, time.monotonic() - began
+        live["stop"].set()
+        done = await asyncio.gather(*tasks, return_exceptions=True)
+        return {
+            "clients": clients,
+            "clients_that_saw_poses": sum(1 for s in seen if s),
+            "decoded_clients": min(DECODED, clients),
+            "all_connected_s": round(connect_s, 1),
+            "seconds": round(took, 1),
+            "errors": [repr(d) for d in done if isinstance(d, BaseException)][:5],
+            "failed_clients": sum(isinstance(d, BaseException) for d in done),
+            "robots_seen_per_client": summarize([len(s) for s in seen[:DECODED]]),
+            "hz_per_robot_per_client": summarize(
+                [sum(s.values()) / len(s) / took for s in seen[:DECODED] if s]
+                + [s["poses"] / max(1, robots) / took for s in seen[DECODED:]]
+            ),
+            "batches_per_s_per_client": summarize([s["batches"] / took for s in seen[DECODED:]]),
+            "staleness_ms": summarize(stale),
+        }
+
+    pipe.send(asyncio.run(main()))
+    pipe.close()
+
+
+async def drain(ws) -> None:
+    async for _ in ws:
+        pass
+
+
+async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients: int, rounds: int) -> dict:
+    shards = {cluster.sim_url(h): cluster.shard_robots(h) for h in ("sim1", "sim2")}
+    cookie = portal.session.cookies.get("sessionid")
+    webs = [cluster.url("web1"), cluster.url("web2")]
+    stop = asyncio.Event()
+    reception = Reception(shards)
+    listening = asyncio.create_task(reception.run(stop))
+    await asyncio.wait_for(reception.ready.wait(), 30)
+    commanders = [await connect(web, cookie) for web in webs]
+    drains = [asyncio.create_task(drain(ws)) for ws in commanders]
+    names = sorted(ids)
+
+    async def turn_all(angular: float) -> dict[str, float]:
+        sent = {}
+        for index, name in enumerate(names):
+            message = {"command": "teleop", "robot": ids[name], "linear": 0.0, "angular": angular}
+            sent[name] = time.time()
+            await commanders[index % 2].send(json.dumps(message))
+        return sent
+
+    await turn_all(0.0)  # warm-up: each web host's links and checks for every robot
+    await asyncio.sleep(2)
+    import multiprocessing
+
+    results, pipe = multiprocessing.Pipe()
+    dashboards = multiprocessing.get_context("spawn").Process(
+        target=browsers, args=(webs, cookie, clients, len(ids), LIVE_S, pipe), name="dashboards"
+    )
+    dashboards.start()
+    # the dashboards connected and given their snapshot before the robots turn
+    ready = await asyncio.to_thread(results.recv) if await asyncio.to_thread(results.poll, 150) else {}
+    print(f"bench.cluster: dashboards connected: {ready}", flush=True)
+    cpu_before, wall_before = cpu_seconds(), time.monotonic()
+    latencies, missing = [], 0
+    for round_ in range(rounds):
+        angular = round(0.3 + 0.01 * round_, 3)
+        sent = await turn_all(angular)
+        deadline = time.monotonic() + 5.0  # a command later than this counts as missing
+        while time.monotonic() < deadline:
+            await asyncio.sleep(0.25)
+            if all(reception.first(name, t0, angular) for name, t0 in sent.items()):
+                break
+        await asyncio.sleep(0.25)
+        for name, t0 in sent.items():
+            got = reception.first(name, t0, angular)
+            if got is None:
+                missing += 1
+            else:
+                latencies.append((got - t0) * 1000)
+    stop_trials = []
+    for _ in range(3):
+        await turn_all(0.5)
+        await asyncio.sleep(1.0)
+        t0 = time.time()
+        await commanders[0].send(json.dumps({"command": "stop", "robots": [ids[n] for n in names]}))
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and not all(reception.first(n, t0, 0.0) for n in names):
+            await asyncio.sleep(0.25)
+        each = [reception.first(name, t0, 0.0) for name in names]
+        got = [(t - t0) * 1000 for t in each if t is not None]
+        stop_trials.append({**summarize(got), "missing": len(names) - len(got)})
+    cpu_after, wall = cpu_seconds(), time.monotonic() - wall_before
+    stop.set()
+    live = await asyncio.to_thread(results.recv) if await asyncio.to_thread(results.poll, 60) else {}
+    dashboards.join(10)
+    for task in drains:
+        task.cancel()
+    for ws in commanders:
+        await ws.close()
+    await asyncio.gather(listening, return_exceptions=True)
+    cpu = {host: round((cpu_after[host] - cpu_before.get(host, 0.0)) / wall, 3) for host in cpu_after}
+    stop_each = [trial["max"] for trial in stop_trials if trial["max"] is not None]
+    return {
+        "commands": {**summarize(latencies), "missing": missing, "rounds": rounds},
+        "stop_all_ms": {
+            "trials": stop_trials,
+            "p99_over_robots": max((t["p99"] for t in stop_trials if t["p99"] is not None), default=None),
+            "to_last_robot_max": max(stop_each, default=None),
+        },
+        "live": live,
+        "cpu_cores": {**cpu, "total": round(sum(cpu.values()), 3)},
+    }
+
+
+def run_size(robots: int, clients: int, rounds: int, out: Path, keep: bool = False) -> dict:
+    # the paper world's own 0.45 m grid fits 532 extra robots; more need a tighter one
+    cluster = Cluster(robots_per_shard=robots // 2, spacing=0.3 if robots > 500 else None)
+    load = os.getloadavg()
+    started = time.monotonic()
+    try:
+        cluster.up(say=lambda line: print(f"cluster: {line}", flush=True))
+        up_s = time.monotonic() - started
+        portal = Portal(cluster.url("web1")).login()
+        shards = [cluster.sim_url("sim1"), cluster.sim_url("sim2")]
+        t0 = time.monotonic()
+        records = portal.register(shards, timeout=300)
+        registration_s = time.monotonic() - t0
+        errors = [record["error"] for record in records if record["error"]]
+        registered = sum(len(record["robots"]) for record in records)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            listed = portal.robots()
+            if len(listed) == registered and all(r["link_status"] == "online" for r in listed.values()):
+                break
+            time.sleep(0.5)
+        online_s = time.monotonic() - t0
+        ids = {name: robot["id"] for name, robot in portal.robots().items()}
+        print(f"bench.cluster: {registered} robots registered in {registration_s:.1f} s", flush=True)
+        measured = asyncio.run(measure(cluster, portal, ids, clients, rounds))
+    finally:
+        if not keep:
+            down(cluster.root, say=lambda line: print(f"cluster: {line}", flush=True))
+    result = {
+        "robots": robots,
+        "registered": registered,
+        "registration_errors": errors,
+        "registration_s": round(registration_s, 3),
+        "online_s": round(online_s, 3),
+        "cluster_up_s": round(up_s, 1),
+        "load_average_at_start": [round(x, 2) for x in load],
+        "cores": os.cpu_count(),
+        "when": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        **measured,
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"size-{robots}.json").write_text(json.dumps(result, indent=1))
+    return result
+
+
+def report(out: Path = OUT) -> dict:
+    """summary.json, REPORT.md and cost_curve.png from every size measured."""
+    sizes = sorted(
+        (json.loads(path.read_text()) for path in out.glob("size-*.json")), key=lambda r: r["robots"]
+    )
+    summary = {
+        "goals_for_1000": GOALS,
+        "sizes": {
+            str(r["robots"]): {
+                "registration_s": r["registration_s"],
+                "online_s": r["online_s"],
+                "command_ms": {"p50": r["commands"]["p50"], "p99": r["commands"]["p99"]},
+                "stop_all_ms": {
+                    "p99": r["stop_all_ms"]["p99_over_robots"],
+                    "to_last_robot": r["stop_all_ms"]["to_last_robot_max"],
+                },
+                "live": {
+                    "clients": r["live"]["clients"],
+                    "robots_seen_per_client_min": r["live"]["robots_seen_per_client"]["min"],
+                    "hz_per_robot_min": r["live"]["hz_per_robot_per_client"]["min"],
+                    "hz_per_robot_p50": r["live"]["hz_per_robot_per_client"]["p50"],
+                    "staleness_p99_ms": r["live"]["staleness_ms"]["p99"],
+                },
+                "cpu_cores_total": r["cpu_cores"]["total"],
+                "registered": r["registered"],
+                "cpu_ms_per_s_per_robot": round(1000 * r["cpu_cores"]["total"] / max(1, r["registered"]), 2),
+                "load_average_at_start": r["load_average_at_start"],
+            }
+            for r in sizes
+        },
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    (out / "REPORT.md").write_text(markdown(summary))
+    plot(summary, out / "cost_curve.png")
+    if (out.parent / report_file.RUN_FILE).exists():  # bench/results/REPORT.md carries this section too
+        report_file.render_all(out.parent)
+    return summary
+
+
+def markdown(summary: dict) -> str:
+    rows = summary["sizes"]
+    lines = [
+        "## Cluster (issue 19): network namespaces db, web1, web2, exec1, exec2, sim1, sim2, links on one machine",
+        "",
+        "`python -m bench.cluster --robots N` (deploy/cluster.py). Goals are the issue's, for 1,000 robots.",
+        "",
+        "| robots | registration (s) | all online (s) | command p50 / p99 (ms) | stop-all p99 / last robot (ms) "
+        "| clients | robots seen per decoding client (min) | pose Hz per robot per client (min / p50) | staleness p99 (ms) | CPU cores "
+        "| CPU ms/s per robot | load at start |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for n, r in rows.items():
+        live = r["live"]
+        lines.append(
+            f"| {n} | {r['registration_s']} | {r['online_s']} | {r['command_ms']['p50']} / {r['command_ms']['p99']} "
+            f"| {r['stop_all_ms']['p99']} / {r['stop_all_ms']['to_last_robot']} | {live['clients']} "
+            f"| {live['robots_seen_per_client_min']} | {live.get('hz_per_robot_min')} / {live['hz_per_robot_p50']} | {live['staleness_p99_ms']} "
+            f"| {r['cpu_cores_total']} | {r['cpu_ms_per_s_per_robot']} | {r['load_average_at_start'][0]} |"
+        )
+    goals = summary["goals_for_1000"]
+    lines += [
+        "",
+        f"Goals (1,000 robots): registration ≤ {goals['registration_s']:g} s; 50 clients each receiving every robot "
+        f"at ≥ {goals['live_hz']:g} Hz with staleness p99 ≤ {goals['staleness_p99_ms']:g} ms; command p99 ≤ "
+        f"{goals['command_p99_ms']:g} ms with all moving; stop-all p99 ≤ {goals['stop_all_p99_ms']:g} ms to the "
+        "last robot.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def plot(summary: dict, path: Path) -> None:
+    """The cost curve: command and stop latency (p99) and CPU per robot against the number of robots."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = summary["sizes"]
+    robots = [int(n) for n in sizes]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    for label, values in (
+        ("command p99", [sizes[str(n)]["command_ms"]["p99"] for n in robots]),
+        ("stop-all, last robot", [sizes[str(n)]["stop_all_ms"]["to_last_robot"] for n in robots]),
+        ("pose staleness p99", [sizes[str(n)]["live"]["staleness_p99_ms"] for n in robots]),
+    ):
+        left.plot(robots, values, marker="o", label=label)
+    left.set(xlabel="robots", ylabel="ms", title="latency (cluster, one 2-core machine)")
+    left.legend()
+    right.plot(robots, [sizes[str(n)]["cpu_ms_per_s_per_robot"] for n in robots], marker="o")
+    right.set(xlabel="robots", ylabel="CPU ms per s per robot", title="CPU per robot (all hosts)")
+    for axis in (left, right):
+        axis.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.cluster", description=__doc__.split("\n")[0])
+    parser.add_argument("--robots", type=int, nargs="*", default=[100], help="total robots (two shards)")
+    parser.add_argument("--clients", type=int, default=50, help="browser-like WebSocket clients")
+    parser.add_argument("--rounds", type=int, default=10, help="teleop rounds to every robot")
+    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--report", action="store_true", help="only remake summary.json, REPORT.md, the plot")
+    parser.add_argument("--keep", action="store_true", help="leave the cluster up after the last size")
+    args = parser.parse_args(argv)
+    if not args.report:
+        reason = reason_unavailable()
+        if reason:
+            print(f"bench.cluster: not run: {reason}", file=sys.stderr)
+            return 1
+        for robots in args.robots:
+            if robots < 2 or robots % 2:
+                parser.error("--robots: an even number of 2 or more (two shards)")
+            run_size(robots, args.clients, args.rounds, args.out, keep=args.keep)
+    summary = report(args.out)
+    print(json.dumps(summary["sizes"], indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

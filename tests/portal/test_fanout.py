@@ -1,0 +1,86 @@
+"""portal.fanout: one reader of the pose ticks per web process, one encoding per tick for all its fleet sockets,
+and a slow socket caught up with the latest pose of each robot it missed, never holding the others back."""
+
+import asyncio
+import json
+
+import pytest
+from channels.layers import get_channel_layer
+
+import live
+from portal import fanout
+from tests.portal.test_websockets import _connect
+
+pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.asyncio, pytest.mark.timeout(30)]
+
+
+def pose(robot_id: int, x: float) -> dict:
+    return {"id": robot_id, "x": x, "y": 0.0, "yaw": 0.0}
+
+
+class Socket:
+    """A consumer's send, held by an event when `slow` (a client that does not read)."""
+
+    def __init__(self, slow: bool = False) -> None:
+        self.sent: list[dict] = []
+        self.gate = asyncio.Event()
+        if not slow:
+            self.gate.set()
+
+    async def send(self, text_data: str) -> None:
+        await self.gate.wait()
+        self.sent.append(json.loads(text_data))
+
+
+async def test_one_encoding_per_tick_for_every_fleet_socket_and_a_slow_one_gets_the_latest_merged(
+    monkeypatch,
+):
+    encoded = []
+    monkeypatch.setattr(
+        fanout, "encode", lambda poses: encoded.append(poses) or json.dumps(live.poses(poses))
+    )
+    hub = fanout.PoseFanout(layer=None)
+    fast = [Socket() for _ in range(3)]
+    slow, page = Socket(slow=True), Socket()
+    for socket in fast:
+        hub.sockets[socket] = fanout._Socket(socket, None)
+    hub.sockets[slow] = fanout._Socket(slow, None)
+    hub.sockets[page] = fanout._Socket(page, 2)  # a robot page: robot 2 only
+
+    ticks = [[pose(1, 0.1), pose(2, 0.1)], [pose(1, 0.2)], [pose(1, 0.3), pose(2, 0.3)]]
+    for tick in ticks:
+        hub.deliver(tick)
+        await asyncio.sleep(0.01)
+    for socket in fast:
+        assert [message["poses"] for message in socket.sent] == ticks
+    assert [message["poses"] for message in page.sent] == [[pose(2, 0.1)], [pose(2, 0.3)]]
+    # the fleet sockets shared one encoding per tick; the page's were its own (one robot each)
+    assert encoded.count(ticks[0]) == 1 and encoded.count(ticks[2]) == 1
+
+    assert slow.sent == []  # still sending the first tick: the others did not wait for it
+    slow.gate.set()
+    await asyncio.sleep(0.01)
+    assert [message["poses"] for message in slow.sent] == [ticks[0], [pose(1, 0.3), pose(2, 0.3)]]
+
+
+async def test_many_dashboards_of_one_process_make_one_member_of_the_poses_group(viewer, fleet):
+    dashboards = [await _connect("/ws/fleet/", viewer) for _ in range(4)]
+    for dashboard in dashboards:
+        await dashboard.receive_json_from(timeout=5)
+    layer = get_channel_layer()
+    members = await layer.connection(layer.consistent_hash(live.POSES_GROUP)).zrange(
+        layer._group_key(live.POSES_GROUP), 0, -1
+    )
+    assert len(members) == 1  # the process's fanout, not one member per socket
+
+    batch = [pose(fleet["turtlebot"].pk, 1.5)]
+    await layer.group_send(live.POSES_GROUP, live.poses(batch))
+    for dashboard in dashboards:
+        assert (await dashboard.receive_json_from(timeout=5))["poses"] == batch
+    for dashboard in dashboards:
+        await dashboard.disconnect()
+    await asyncio.sleep(0.05)
+    left = await layer.connection(layer.consistent_hash(live.POSES_GROUP)).zrange(
+        layer._group_key(live.POSES_GROUP), 0, -1
+    )
+    assert left == []  # the last socket out took the reader out of the group
