@@ -47,14 +47,19 @@ class _Socket:
 
 
 class PoseFanout:
-    """One reader of the poses group for this event loop; subscribe() the sockets that show poses."""
+    """One reader of the poses group for this event loop; subscribe() the sockets that show poses.
+
+    A socket's connect never waits on Redis here: subscribing only starts the reader when none runs, and the
+    reader joins the group, reads, and leaves the group by itself. (A connect once waited on a lock held across
+    Redis calls; when those hung, the page's socket never took its commands, a stop among them.)
+    """
+
+    LEAVE_S = 2.0  # how long the last socket out waits for the reader to leave the group
 
     def __init__(self, layer) -> None:
         self.layer = layer
         self.sockets: dict[object, _Socket] = {}
-        self.channel: str | None = None
         self.reader: asyncio.Task | None = None
-        self.started = asyncio.Lock()
 
     @classmethod
     def of(cls, layer) -> PoseFanout:
@@ -68,44 +73,55 @@ class PoseFanout:
     async def subscribe(self, consumer, robot_id: int | None = None) -> None:
         """From now on the consumer gets every tick (or its robot's poses in each tick)."""
         self.sockets[consumer] = _Socket(consumer, robot_id)
-        async with self.started:
-            if self.reader is None or self.reader.done():
-                # the layer's default prefix: channels_redis reads a process's channels of one prefix together
-                self.channel = await self.layer.new_channel()
-                await self.layer.group_add(live.POSES_GROUP, self.channel)
-                self.reader = asyncio.ensure_future(self._read(self.channel))
+        if self.reader is None or self.reader.done():
+            self.reader = asyncio.ensure_future(self._read())
 
     async def unsubscribe(self, consumer) -> None:
-        """The socket closed; the last one out stops the reader and leaves the group."""
+        """The socket closed; the last one out stops the reader, which leaves the group (waited for, bounded)."""
         self.sockets.pop(consumer, None)
-        async with self.started:
-            if self.sockets or self.reader is None:
-                return
-            self.reader.cancel()
-            with contextlib.suppress(asyncio.CancelledError, Exception):
-                await self.reader
-            self.reader = None
-            with contextlib.suppress(Exception):  # Redis away: the membership lapses by itself
-                await self.layer.group_discard(live.POSES_GROUP, self.channel)
+        if self.sockets or self.reader is None:
+            return
+        reader, self.reader = self.reader, None
+        reader.cancel()
+        await asyncio.wait({reader}, timeout=self.LEAVE_S)
 
-    async def _read(self, channel: str) -> None:
-        rejoined = asyncio.get_running_loop().time()
-        while True:
-            try:
-                message = await self.layer.receive(channel)
-            except asyncio.CancelledError:
-                raise
-            except Exception:  # Redis lost for a moment: the ticks resume when it is back
-                log.exception("pose fanout: reading the poses group failed")
-                await asyncio.sleep(1.0)
-                continue
-            if message.get("type") == TICK:
-                self.deliver(message.get("poses") or [])
-            now = asyncio.get_running_loop().time()
-            if now - rejoined > REJOIN_S:
-                rejoined = now
-                with contextlib.suppress(Exception):
-                    await self.layer.group_add(live.POSES_GROUP, channel)
+    async def _read(self) -> None:
+        # the layer's default prefix: channels_redis reads a process's channels of one prefix together
+        channel = await self.layer.new_channel()
+        joined = None  # loop time of the last group_add that went through
+        try:
+            while True:
+                now = asyncio.get_running_loop().time()
+                if joined is None or now - joined > REJOIN_S:
+                    when = await self._join(channel)
+                    if when is None and joined is None:
+                        continue  # not in the group yet: nothing would come
+                    joined = when or joined
+                try:
+                    message = await self.layer.receive(channel)
+                except asyncio.CancelledError:
+                    raise
+                except Exception:  # Redis lost for a moment: the ticks resume when it is back
+                    log.exception("pose fanout: reading the poses group failed")
+                    await asyncio.sleep(1.0)
+                    continue
+                if message.get("type") == TICK:
+                    self.deliver(message.get("poses") or [])
+        finally:
+            with contextlib.suppress(Exception):  # Redis away: the membership lapses by itself
+                await asyncio.wait_for(self.layer.group_discard(live.POSES_GROUP, channel), self.LEAVE_S)
+
+    async def _join(self, channel: str) -> float | None:
+        """Join (or renew) the group; the loop time it went through, None when Redis did not answer."""
+        try:
+            await asyncio.wait_for(self.layer.group_add(live.POSES_GROUP, channel), self.LEAVE_S)
+        except asyncio.CancelledError:
+            raise
+        except Exception:
+            log.warning("pose fanout: joining the poses group failed; trying again", exc_info=True)
+            await asyncio.sleep(1.0)
+            return None
+        return asyncio.get_running_loop().time()
 
     def deliver(self, poses: list) -> None:
         """Hand one tick to every socket: one encoding for all the fleet sockets that are free."""

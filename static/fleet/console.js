@@ -36,7 +36,8 @@ export class Console {
 
   // The robots ticked in the page's robot table (dashboard), by id; none on pages without one.
   selectedIds() {
-    return [...document.querySelectorAll("#robot-table tr.selected[data-robot-id]")].map((tr) => Number(tr.dataset.robotId));
+    const boxes = document.querySelectorAll("#robot-table tr[data-robot-id]:not([hidden]) input.pick:checked");
+    return [...boxes].map((box) => Number(box.value));
   }
 
   // body: { text } typed by a person, or { robot_ids, destination } from a click on the map or a location.

@@ -95,8 +95,13 @@ export class RobotTable {
     this.syncPickAll();
   }
 
+  // The robots ticked and shown, read from the boxes themselves: a box ticked on a row the server drew, before
+  // the socket's snapshot came, counts too (the row's id and name stand in for the robot until then).
   selected() {
-    return [...this.tbody.querySelectorAll("input.pick:checked")].map((box) => this.robots.get(Number(box.value))).filter(Boolean);
+    return [...this.tbody.querySelectorAll("tr[data-robot-id]:not([hidden]) input.pick:checked")].map((box) => {
+      const tr = box.closest("tr");
+      return this.robots.get(Number(box.value)) || { id: Number(box.value), name: tr.dataset.name };
+    });
   }
 
   load(rows) {

@@ -9,6 +9,15 @@ from robots.models import Binding, Robot
 from simworker.testing import free_port
 
 
+def slot_hours() -> tuple[str, str]:
+    """A two-hour time slot well away from now: a robot in its slot is refused other work, so a fixed slot made
+    the tests that instruct the fleet fail during its hours (a CI run at 08:11 did, with "08:00-10:00")."""
+    from django.utils import timezone
+
+    start = 14 if timezone.localtime().hour < 8 else 2
+    return f"{start:02d}:00", f"{start + 2:02d}:00"
+
+
 @pytest.fixture
 def small_map(db):
     """A 20 x 20 cell map (1 m x 1 m at 5 cm) with a wall row and two locations."""
@@ -43,8 +52,9 @@ def fleet(db, small_map):
             {"target": "/odom_raw", "type": "nav_msgs/Odometry", "score": 0.5, "how": "pattern"},
         ],
     )  # fmt: skip
+    start, end = slot_hours()
     TimeSlot.objects.create(
-        robot=turtlebot, start="08:00", end="10:00", goal=small_map.locations.get(name="A"), task="rotate(5)"
+        robot=turtlebot, start=start, end=end, goal=small_map.locations.get(name="A"), task="rotate(5)"
     )
     return {"turtlebot": turtlebot, "husky": husky}
 
@@ -177,7 +187,8 @@ def world(db):
     binding = Binding.objects.create(
         robot=robot, action="odometry", needs_user=True, candidates=[{"target": "/odom", "type": "x"}]
     )
-    slot = TimeSlot.objects.create(robot=robot, start="08:00", end="09:00", goal=place, task="")
+    start, end = slot_hours()
+    slot = TimeSlot.objects.create(robot=robot, start=start, end=end, goal=place, task="")
     return {"robot": robot, "binding": binding, "slot": slot, "location": place}
 
 

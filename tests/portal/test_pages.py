@@ -7,6 +7,7 @@ from access import leases
 from audit.models import AuditEntry
 from execution.models import Instruction
 from robots.models import Binding
+from tests.portal.conftest import slot_hours
 
 PAGES = ["dashboard", "robot-list", "registration", "schedules", "history"]
 
@@ -93,7 +94,8 @@ def test_operator_cannot_choose_a_binding(client_for, operator, fleet):
 
 def test_schedule_has_the_shape_of_table_12(client_for, viewer, fleet_admin, fleet):
     page = client_for(viewer).get(reverse("schedules")).content.decode()
-    assert "08:00–10:00" in page
+    start, end = slot_hours()
+    assert f"{start}–{end}" in page
     assert "A(0.2, 0.2) + rotate(5)" in page
     assert "FreeTime" in page  # the husky has no slot
     assert "slot-form" not in page
