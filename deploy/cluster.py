@@ -235,14 +235,7 @@ class Cluster:
 
     def kill_host(self, host: str) -> list[int]:
         """kill -9 every process of a host (all of its namespace's), as a lost machine; their pids."""
-        pids = host_pids(host)
-        for pid in pids:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and any(alive(pid) for pid in pids):
-            time.sleep(0.05)
-        return pids
+        return kill_all(host_pids(host))
 
     def run_in(self, host: str, *argv: str, timeout: float = 300) -> subprocess.CompletedProcess:
         """A one-off command on a host (migrate, setup_demo), as the host's processes run."""
@@ -334,16 +327,23 @@ def alive(pid: int) -> bool:
         return False
 
 
-def down(root: Path = DEFAULT_DIR, say=print) -> None:
-    """Remove every process, namespace, veth and the bridge a cluster made; keep only its logs. Idempotent."""
-    found = namespaces()
-    pids = [int(p) for ns in found for p in sh("ip", "netns", "pids", ns, check=False).stdout.split()]
+def kill_all(pids: list[int], wait_s: float = 10.0) -> list[int]:
+    """kill -9 each process and wait (bounded) until none is alive; the pids."""
     for pid in pids:
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + wait_s
     while time.monotonic() < deadline and any(alive(pid) for pid in pids):
         time.sleep(0.05)
+    return pids
+
+
+def down(root: Path = DEFAULT_DIR, say=print) -> None:
+    """Remove every process, namespace, veth and the bridge a cluster made; keep only its logs. Idempotent."""
+    found = namespaces()
+    pids = kill_all(
+        [int(p) for ns in found for p in sh("ip", "netns", "pids", ns, check=False).stdout.split()]
+    )
     for ns in found:
         sh("ip", "netns", "del", ns, check=False)
     for host in HOSTS:  # a veth left by an `up` that died between its two ends
