@@ -6,10 +6,14 @@ The algorithms are plain (fleetcore.traffic); this module keeps their state in R
    robots have reserved, the cells they hold now and the robots parked (forever, where they stand); its own
    timed path is then reserved under its id, until its step ends. First come, first reserved (prioritized
    planning): a newcomer waits or detours, robots under way are never replanned by it.
-2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the cells its footprint
-   sweeps there. A claim is refused while another robot holds one of those cells or stands on one; the robot
+   Reservations are heeded WINDOW_S ahead (windowed cooperative A*), so a robot replans from where it is
+   before its window runs out (every REPLAN_S), against what the others reserved meanwhile.
+2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the room its footprint
+   sweeps there. A claim is refused while another robot holds some of that room or stands in it; the robot
    then waits where it is and says for whom ("waiting for robot3"). Timing never has to be exact: a robot late
-   or early against its reservation is held back by the claims, so no two robots are ever given the same cells.
+   or early against its reservation is held back by the claims, so no two robots are ever given the same room.
+   A claim is checked and written in one Redis transaction (WATCH on the claims: optimistic, no lock to wait
+   for or to lapse), so two robots claiming at the same moment never both get the same room.
 3. Deadlock. Waiting robots note whom they wait for; a cycle of waits (fleetcore.traffic.wait_cycle) is broken
    by its robot with the highest id, which drops its claim ahead and replans around the robots of the cycle.
    A robot waiting on one that is parked (not under traffic) goes around it after REROUTE_AFTER_S.
@@ -20,12 +24,13 @@ first: their goals never conflict with the reservations (execution.steps.navigat
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import json
 import logging
 import math
 import time
+
+from redis.exceptions import WatchError
 
 import live
 from execution import coordination, route, spots
@@ -44,18 +49,27 @@ CLAIM_MARGIN = 0.05  # m more kept between two robots' room when claiming (2 x 0
 APPROACH_SLACK = 0.03  # m a robot already too close may come nearer (a route planned on cells wobbles)
 PLAN_MARGIN = 0.1  # m more again when planning round robots that stand (robots stop up to 0.2 m off a point)
 CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses after this
+RENEW_BEFORE_S = 20.0  # a waiting robot renews its claim once less than this is left of it
+CLAIM_LIMIT_S = 10.0  # s of claims lost to others' writes (WATCH) before a claim gives up
 HOLD_S = 4.0  # s the cells another robot holds now are reserved for, in a newcomer's plan
 WAIT_LIMIT_S = 120.0  # s a robot waits for cells before its step fails
 REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before going around it
 BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
 BUSY = ("running", "queued")
 MAX_REROUTES = 4
-MUTEX_TTL_MS = 3000
-WAIT_POLL_S = 0.1  # s between a waiting robot's tries
+MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
+REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned (its window runs out)
+WAIT_POLL_S = 0.2  # s between a waiting robot's tries
+NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and its deadlock checks)
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
+EARLY_S = 0.5  # s a robot may set off on a stretch before the time its plan gives
 PLANNED_SPEED = 0.7  # of the commanded speed: turns on the spot and ramps make robots slower than their top
+
+
+class Replan(Exception):
+    """The plan's window runs out: plan again from here, against what the others reserved meanwhile."""
 
 
 class Reroute(Exception):
@@ -70,27 +84,6 @@ def _key(name: str) -> str:
     return coordination.key("traffic", name)
 
 
-@contextlib.contextmanager
-def mutex(progress=None, limit_s: float = 10.0):
-    """One planner or claimer at a time across every worker (check-then-write must not interleave).
-
-    progress() is called while waiting (the waiting robot keeps its own lock and hears a stop)."""
-    redis, token = coordination.connection(), coordination.new_token()
-    deadline = time.monotonic() + limit_s
-    for tries in itertools.count():
-        if redis.set(_key("mutex"), token, nx=True, px=MUTEX_TTL_MS):
-            break
-        if time.monotonic() > deadline:
-            raise StepFailed("the traffic table is busy (its lock was not released); try again")
-        if progress is not None and tries % 20 == 19:
-            progress()
-        time.sleep(0.005)
-    try:
-        yield redis
-    finally:
-        redis.eval(coordination.RELEASE, 1, _key("mutex"), token)
-
-
 def reach(robot: Robot) -> float:
     """The radius a robot takes in traffic: the farthest corner of its footprint from its centre (as goal spots
     count it), plus a margin."""
@@ -99,8 +92,12 @@ def reach(robot: Robot) -> float:
 
 def _hash(redis, name: str) -> dict[int, dict]:
     """A traffic hash's entries by robot id, without the lapsed ones."""
+    return _live(redis.hgetall(_key(name)))
+
+
+def _live(raw_entries: dict) -> dict[int, dict]:
     now, out = time.time(), {}
-    for field, raw in redis.hgetall(_key(name)).items():
+    for field, raw in raw_entries.items():
         entry = json.loads(raw)
         if entry.get("expires", math.inf) > now:
             out[int(field)] = entry
@@ -202,8 +199,7 @@ def plan(
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
         path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
-    with mutex(progress) as redis:
-        _reserve(redis, robot, path, radius, now)
+    _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
     return path
 
 
@@ -268,22 +264,41 @@ def routes(robot_ids) -> dict[int, dict]:
     }
 
 
-def claim(robot: Robot, start, end, progress=None) -> int | None:
+def claim(robot: Robot, start, end, progress=None, everyone=None) -> int | None:
     """Claim the stretch from start to end for the robot (replacing its previous claim); the id of a robot in
-    the way (holding room there, or standing there), or None when the claim is the robot's."""
-    radius = reach(robot)
-    everyone = standing(coordination.connection(), {robot.pk})  # the slow part (database), before the lock
-    with mutex(progress) as redis:
-        claims = {pk: _capsule(pk, e) for pk, e in _hash(redis, "claims").items() if pk != robot.pk}
-        others = [*claims.values(), *(disc for disc, _ in everyone if int(disc.label) not in claims)]
-        blocker = plain.first_in_the_way(
-            tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK
-        )
-        if blocker is not None:
-            return int(blocker.label)
-        entry = {"a": list(start), "b": list(end), "r": radius, "expires": time.time() + CLAIM_TTL_S}
-        _put(redis, "claims", robot.pk, entry)
-        redis.hdel(_key("waits"), str(robot.pk))
+    the way (holding room there, or standing there), or None when the claim is the robot's.
+
+    everyone: the robots standing (standing()), when the caller has them (a waiting robot reads them less
+    often than it tries)."""
+    radius, redis = reach(robot), coordination.connection()
+    if everyone is None:
+        everyone = standing(redis, {robot.pk})  # the slow part (database), before the transaction
+    deadline = time.monotonic() + CLAIM_LIMIT_S
+    while True:
+        with redis.pipeline() as pipe:
+            try:
+                pipe.watch(_key("claims"))
+                return _claim(pipe, robot, start, end, radius, everyone)
+            except WatchError:  # another robot's claim was written between our read and our write: again
+                if time.monotonic() > deadline:
+                    raise StepFailed("the traffic table is too busy to claim a stretch; try again") from None
+                if progress is not None:
+                    progress()
+
+
+def _claim(pipe, robot: Robot, start, end, radius: float, everyone) -> int | None:
+    """Within a WATCH on the claims: the robot in the way, or write the claim (and drop the robot's wait)."""
+    claims = {pk: _capsule(pk, e) for pk, e in _live(pipe.hgetall(_key("claims"))).items() if pk != robot.pk}
+    others = [*claims.values(), *(disc for disc, _ in everyone if int(disc.label) not in claims)]
+    blocker = plain.first_in_the_way(tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK)
+    if blocker is not None:
+        pipe.unwatch()
+        return int(blocker.label)
+    entry = {"a": list(start), "b": list(end), "r": radius, "expires": time.time() + CLAIM_TTL_S}
+    pipe.multi()
+    pipe.hset(_key("claims"), str(robot.pk), json.dumps(entry, separators=(",", ":")))
+    pipe.hdel(_key("waits"), str(robot.pk))
+    pipe.execute()
     return None
 
 
@@ -308,10 +323,14 @@ def deadlocks() -> int:
 
 def wait_for(session: Session, start, end) -> None:
     """Claim the stretch, waiting while another robot is in the way; raise Reroute to break a deadlock or to
-    go around a robot that is not under way; StepFailed after WAIT_LIMIT_S."""
+    go around a robot that is not under way; StepFailed after WAIT_LIMIT_S.
+
+    A waiting robot tries every WAIT_POLL_S; every NOTE_WAIT_S it reads the robots standing afresh, notes
+    whom it waits for, keeps its claim alive and looks for a cycle of waits."""
     robot, redis = session.robot, coordination.connection()
-    started, same_since, last, name = time.monotonic(), time.monotonic(), None, ""
-    while (blocker := claim(robot, start, end, session.check)) is not None:
+    started = same_since = noted = time.monotonic()
+    last, name, everyone = None, "", None
+    while (blocker := claim(robot, start, end, session.check, everyone)) is not None:
         now = time.monotonic()
         if blocker != last:
             same_since, last = now, blocker
@@ -319,12 +338,15 @@ def wait_for(session: Session, start, end) -> None:
             log.debug("traffic: %s waits for %s to go from %s to %s", robot.name, name, start, end)
             live.path(robot, None, name)
             session.link.halt()
-        _put(redis, "waits", robot.pk, {"for": blocker, "expires": time.time() + 2.0})
-        _renew(redis, robot.pk)
-        _check_deadlock(redis, robot.pk)
-        if now - same_since > REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
-            log.info("traffic: %s goes round %s, which stands in its way", robot.name, name)
-            raise Reroute({blocker})
+            noted = -math.inf
+        if now - noted >= NOTE_WAIT_S:
+            noted, everyone = now, standing(redis, {robot.pk})
+            _put(redis, "waits", robot.pk, {"for": blocker, "expires": time.time() + 2.0})
+            _renew(redis, robot.pk)
+            _check_deadlock(redis, robot.pk)
+            if now - same_since > REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
+                log.info("traffic: %s goes round %s, which stands in its way", robot.name, name)
+                raise Reroute({blocker})
         if now - started > WAIT_LIMIT_S:
             raise StepFailed(f"{robot.name}: waited {WAIT_LIMIT_S:.0f} s for {name} to make way")
         session.check()
@@ -342,10 +364,14 @@ def _parked(redis, blocker: int, waited: float) -> bool:
 
 
 def _renew(redis, robot_id: int) -> None:
-    """Keep the robot's claim (where it stands and what it holds) alive while it waits."""
+    """Keep the robot's claim (where it stands and what it holds) alive while it waits, once it is needed
+    (each write of the claims makes the others' claims in flight try again)."""
     raw = redis.hget(_key("claims"), str(robot_id))
-    if raw is not None:
-        _put(redis, "claims", robot_id, {**json.loads(raw), "expires": time.time() + CLAIM_TTL_S})
+    if raw is None:
+        return
+    entry = json.loads(raw)
+    if entry.get("expires", 0) - time.time() < RENEW_BEFORE_S:
+        _put(redis, "claims", robot_id, {**entry, "expires": time.time() + CLAIM_TTL_S})
 
 
 def _check_deadlock(redis, robot_id: int) -> None:
@@ -380,20 +406,26 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     robot = session.robot
     speed = limits.linear * factor * PLANNED_SPEED
     around: set[int] = set()
+    reroutes = 0
     here = session.pose()[:2]
     claim(robot, here, here, session.check)  # under traffic from now on: others wait for it, not go round it
     try:
-        for _ in range(MAX_REROUTES + 1):
+        for _ in range(MAX_REPLANS):
             pose = session.pose()
             path = plan(robot, pose[:2], goal, speed, around, progress=session.check)
             try:
                 _follow(session, path, limits, factor, nav)
                 return _moved(tuple(goal), path[-1][:2])
+            except Replan:
+                continue
             except Reroute as exc:
+                reroutes += 1
+                if reroutes > MAX_REROUTES:
+                    raise StepFailed(f"{robot.name}: no way through after {MAX_REROUTES} reroutes") from None
                 around |= exc.around
                 here = session.pose()[:2]
                 claim(robot, here, here, session.check)  # keep only where it stands: the others may go on
-        raise StepFailed(f"{robot.name}: no way through after {MAX_REROUTES} reroutes")
+        raise StepFailed(f"{robot.name}: not there after {MAX_REPLANS} plans")
     finally:
         release(robot, session.link.poses.value)
 
@@ -407,15 +439,23 @@ def _moved(goal, end) -> str:
 
 def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
-    asked for, or the free spot next to it when that was taken)."""
-    robot, goal = session.robot, path[-1][:2]
+    asked for, or the free spot next to it when that was taken). Replan once the plan is REPLAN_S old.
+
+    A robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower than the
+    robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then there."""
+    robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
+    due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
+        if i and time.time() - planned > REPLAN_S:
+            raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
-        pose = session.pose()
+        if hold or time.time() < due - EARLY_S:  # a planned wait, or early: keep to the plan's times
+            _hold(session, t if hold else due - EARLY_S)
+        due = t
         if hold:
-            _hold(session, t)
             continue
+        pose = session.pose()
         wait_for(session, pose[:2], (x, y))
         last = i == len(legs) - 1
         target = tuple(goal) if last else (x, y)

@@ -14,6 +14,7 @@ Time is in seconds on one clock shared by everyone who reserves (the execution e
 
 from __future__ import annotations
 
+import bisect
 import heapq
 import itertools
 import math
@@ -24,6 +25,7 @@ TRAFFIC_CELL = 0.2  # m: the reservation table's grid
 SPOT_MARGIN = 0.3  # m kept between two robots' discs at their goals (more than execution.traffic plans with)
 SPOT_STEP = 0.1  # m between the rings searched for a free spot
 SPOT_SEARCH_M = 4.0  # m: how far from the place a free spot is looked for
+WINDOW_S = 30.0  # s ahead a plan heeds others' reservations (windowed cooperative A*: it is replanned sooner)
 FOREVER = math.inf
 COMPASS = ("east", "north-east", "north", "north-west", "west", "south-west", "south", "south-east")
 
@@ -204,6 +206,25 @@ class ReservationTable:
                     return who
         return None
 
+    def window(self, until: float) -> ReservationTable:
+        """The reservations that begin before `until`: what a windowed plan heeds."""
+        near: dict[Cell, list[tuple[float, float, str]]] = {}
+        for c, entries in self.cells.items():
+            kept = [entry for entry in entries if entry[0] < until]
+            if kept:
+                near[c] = kept
+        return ReservationTable(near)
+
+    def intervals(self, robot: str = "") -> Busy:
+        """Everyone else's reservations merged per cell, for fast look-ups while searching."""
+        return Busy(
+            {
+                c: [(a, b) for a, b, who in entries if who != robot]
+                for c, entries in self.cells.items()
+                if any(who != robot for _, _, who in entries)
+            }
+        )
+
     def free_after(self, cells: Iterable[Cell], t: float, robot: str = "") -> bool:
         """Whether nobody else holds these cells at any time from t on (a robot may park there)."""
         return self.holder(cells, t, FOREVER, robot) is None
@@ -223,6 +244,34 @@ class ReservationTable:
         return all(
             self.holder(cells, t0, t1, robot) is None for cells, t0, t1 in leg_slots(a, b, radius, pad)
         )
+
+
+class Busy:
+    """When each cell is held by someone: sorted, merged intervals per cell (ReservationTable.intervals)."""
+
+    def __init__(self, held: dict[Cell, list[tuple[float, float]]]) -> None:
+        self.starts: dict[Cell, list[float]] = {}
+        self.ends: dict[Cell, list[float]] = {}
+        for c, spans in held.items():
+            merged: list[list[float]] = []
+            for a, b in sorted(spans):
+                if merged and a <= merged[-1][1]:
+                    merged[-1][1] = max(merged[-1][1], b)
+                else:
+                    merged.append([a, b])
+            self.starts[c] = [a for a, _ in merged]
+            self.ends[c] = [b for _, b in merged]
+
+    def taken(self, cells: Iterable[Cell], lo: float, hi: float) -> bool:
+        """Whether any of these cells is held at a time overlapping [lo, hi]."""
+        for c in cells:
+            ends = self.ends.get(c)
+            if ends is None:
+                continue
+            i = bisect.bisect_right(ends, lo)  # the first interval still going on after lo
+            if i < len(ends) and self.starts[c][i] < hi:
+                return True
+        return False
 
 
 def leg_slots(a, b, radius: float, pad, step: float = TRAFFIC_CELL):
@@ -297,7 +346,10 @@ class SpaceTimeSearch:
     pad(t): seconds added on both sides of each reserved interval (timing uncertainty grows with time).
     A state is (cell, time); moves go to the 8 neighbours or wait one tick where it stands. The heuristic is the
     exact distance on the static grid (one Dijkstra from the goal), so the search only explores detours and
-    waits that the reservations force.
+    waits that the reservations force. Reservations are heeded window_s ahead (windowed cooperative A*, Silver
+    2005): beyond that, timing is too uncertain to plan around, and a search that must thread every far-off
+    reservation fails for lack of expansions; the robot replans before its window runs out, and the claims
+    keep it apart from the others meanwhile. Where others will stand for good is always heeded.
     """
 
     passable: Callable[[Cell], bool]
@@ -306,6 +358,7 @@ class SpaceTimeSearch:
     pad: Callable[[float], float] = lambda t: 0.5
     max_expansions: int = 60_000
     horizon_s: float = 240.0
+    window_s: float = WINDOW_S
 
     def plan(
         self,
@@ -318,10 +371,11 @@ class SpaceTimeSearch:
         progress: Callable[[], None] | None = None,
     ) -> list[tuple[float, float, float]] | None:
         """A timed path [(x, y, t), ...] from start to goal avoiding the table's reservations at their times
-        and the robots standing, exactly, as discs (each from its time `since` on: a robot parked now has
-        -inf, another's goal the time it arrives there), ending where the robot may stay; consecutive equal
-        points are waits. The cells the robot stands on at the start are its own until it moves.
-        progress() is called every few hundred steps of work (keep a lock alive, honour a stop). None: no plan."""
+        (those that begin within the window) and the robots standing, exactly, as discs (each from its time
+        `since` on: a robot parked now has -inf, another's goal the time it arrives there), ending where the
+        robot may stay; consecutive equal points are waits. The cells the robot stands on at the start are
+        its own until it moves. progress() is called every few hundred steps of work (keep a lock alive,
+        honour a stop). None: no plan."""
         self._progress = progress or (lambda: None)
         s, g = cell_of(start), cell_of(goal)
         distance = self._distances(g, s)
@@ -331,11 +385,19 @@ class SpaceTimeSearch:
         offsets = disc_offsets(self.radius)
         near = Clearance(standing, self.radius, self.pad, {s: start, g: goal})
         self._near = near
+        near_term = table.window(t0 + self.window_s)
+        busy = near_term.intervals(robot)
+        mine = {(s[0] + dc, s[1] + dr) for dc, dr in offsets}
+        feet: dict[tuple[Cell, bool], tuple[Cell, ...]] = {}
 
-        def cells(c: Cell) -> list[Cell]:
-            return [(c[0] + dc, c[1] + dr) for dc, dr in offsets]
+        def cells(c: Cell, own: bool = False) -> tuple[Cell, ...]:
+            """Its footprint at c, cached; own: less the room it stood on at the start (its own until it
+            has left it)."""
+            if (c, own) not in feet:
+                foot = [(c[0] + dc, c[1] + dr) for dc, dr in offsets]
+                feet[c, own] = tuple(x for x in foot if x not in mine) if own else tuple(foot)
+            return feet[c, own]
 
-        mine = set(cells(s))
         squeezed = near.gap(s, t0) < 0  # it starts nearer to a robot standing than it should come
         counter = itertools.count()
         start_state = (s, 0)
@@ -349,8 +411,8 @@ class SpaceTimeSearch:
                 self._progress()
             _, _, state, t = heapq.heappop(openq)
             c = state[0]
-            if c == g and table.free_after(cells(c), t - self.pad(t), robot) and near.stays(c, t):
-                return self._timed(state, parent, times, start, goal, table, robot)
+            if c == g and not busy.taken(cells(c), t - self.pad(t), FOREVER) and near.stays(c, t):
+                return self._timed(state, parent, times, start, goal, near_term, robot)
             if t - t0 > self.horizon_s:
                 continue
             for dc, dr, d in [*MOVES, (0, 0, 1.0)]:
@@ -358,10 +420,8 @@ class SpaceTimeSearch:
                 if n not in distance:
                     continue
                 t1 = t + d * tick
-                here = set(cells(c)) if (dc, dr) == (0, 0) else set(cells(c)) | set(cells(n))
-                if c in mine:  # still within where it stood: that room is its own (neighbours may be close)
-                    here -= mine
-                if here and table.holder(here, t - self.pad(t), t1 + self.pad(t1), robot) is not None:
+                lo, hi, own = t - self.pad(t), t1 + self.pad(t1), c in mine
+                if busy.taken(cells(c, own), lo, hi) or (n != c and busy.taken(cells(n, own), lo, hi)):
                     continue
                 if not near.may_move(c, n, t1, loose=squeezed and c in mine):
                     continue

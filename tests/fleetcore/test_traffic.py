@@ -115,13 +115,39 @@ def test_a_robot_standing_is_gone_round_and_a_robot_parked_close_may_leave():
     assert squeezed is not None and squeezed[-1][:2] == (0.1, 2.0)
 
 
-def test_nobody_parks_where_another_robot_will_pass_later():
+def test_nobody_parks_where_another_robot_will_pass_within_the_window():
     table = ReservationTable()
     goal = (0.1, 0.1)
-    table.reserve("a", traffic.footprint_cells(goal, 0.15), 30.0, 35.0)  # a passes the goal at t = 30..35
+    table.reserve("a", traffic.footprint_cells(goal, 0.15), 20.0, 25.0)  # a passes the goal at t = 20..25
     path = search().plan((-2.0, 0.1), goal, 0.0, table, "b")
-    assert path is None or path[-1][2] >= 35.0  # b arrives after a has passed, or finds no plan
     assert path is not None
+    assert path[-1][2] >= 25.0  # b arrives after a has passed (alone it would be there by t = 5)
+
+
+def test_reservations_beyond_the_window_do_not_hold_a_plan_up():
+    """Windowed cooperative A*: what others reserved further ahead than the window is left to a later plan
+    (and to the claims), so it neither delays this plan nor makes the search fail."""
+    table = ReservationTable()
+    goal = (0.1, 0.1)
+    late = traffic.WINDOW_S + 5.0
+    table.reserve("a", traffic.footprint_cells(goal, 0.15), late, late + 5.0)
+    path = search().plan((-2.0, 0.1), goal, 0.0, table, "b")
+    assert path is not None and path[-1][2] < 10.0  # straight there: 2.1 m at 0.5 m/s
+    table.reserve("a", traffic.footprint_cells((-1.0, 0.1), 0.15), 1.0, 4.0)  # within the window: heeded
+    assert search().plan((-2.0, 0.1), goal, 0.0, table, "b")[-1][2] > path[-1][2]
+
+
+def test_busy_intervals_agree_with_the_table():
+    table = ReservationTable()
+    table.reserve("a", [(0, 0)], 1.0, 2.0)
+    table.reserve("b", [(0, 0)], 1.5, 3.0)
+    table.reserve("c", [(0, 0)], 5.0, 6.0)
+    table.reserve("me", [(1, 1)], 0.0, 9.0)
+    busy = table.intervals("me")
+    for lo, hi in [(0.0, 1.0), (0.0, 1.1), (2.5, 2.9), (3.0, 5.0), (3.1, 4.9), (5.5, 9.0), (6.0, 7.0)]:
+        expected = table.holder([(0, 0)], lo, hi, "me") is not None
+        assert busy.taken([(0, 0)], lo, hi) is expected, (lo, hi)
+    assert not busy.taken([(1, 1)], 0.0, 9.0)  # its own reservations never hold it up
 
 
 def test_an_unreachable_goal_has_no_plan():
