@@ -1,13 +1,21 @@
 """Fleet coordination in the warehouse world: robots sent at once on crossing routes, and allocation at scale.
 
-`python -m bench.coordination [--quick|--full]` writes bench/results/coordination.json:
+`python -m bench.coordination [--quick|--full] [--counts N ...] [--workers K]` writes
+bench/results/coordination.json:
 {"coordination": {"<n>": {"contacts", "deadlocks", "completion", "makespan_s", "lone_s", "makespan_ratio"},
- "allocation_ms_1000": {"p50", "p99"}}, ...}.
+ "allocation_ms_1000": {"p50", "p99"}, "executors": {"workers", "threads", "database"}}, ...}.
 
 For n = 2, 4, 8, 16, 32 robots (quick: 2, 4, 8) of mixed models (Huskies, TurtleBots, TIAGos with move_base;
 not the Spots, whose go_to_pose the simulator does not serve), each gets a goal on the far side of the warehouse (robots from the west go east and the other way
 round, so the routes cross), submitted together as one instruction per robot through
-execution.instructions.submit, run by the execution engine in this process (threads) against the simulator.
+execution.instructions.submit, run by the execution engine on K Celery worker processes (threads pool, enough
+threads for every robot) against the simulator, itself in a process of its own (simworker.testing.WorldProcess):
+what is measured is the traffic layer, not one interpreter's lock shared by the physics and 32 executors.
+With DATABASE_URL naming a PostgreSQL server, the bench runs on a scratch database there (bench_coordination,
+created afresh and dropped at the end); else on a SQLite file, which locks under many robots.
+The scheduler process (`manage.py scheduler`) is not started: every instruction names its robot, which is free,
+so nothing waits for allocation, and the executors themselves fail an instruction whose lock lapsed; its
+watchdog would only add the stop of a robot whose worker died.
 
 - contacts: robot-robot contacts counted by the simulator's physics (simworker.physics, a pymunk handler);
 - deadlocks: wait-for cycles the traffic layer found (and broke by rerouting one robot), execution.traffic;
@@ -26,14 +34,25 @@ from __future__ import annotations
 import math
 import os
 import random
+import socket
 import statistics
 import sys
 import tempfile
 import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from urllib.parse import urlparse
 
 from bench import component
 
 RESULT_FILE = "coordination.json"
+WORKERS = 4  # Celery worker processes running the robots' executors (--workers)
+WORKER_START_TIMEOUT = 60.0  # s: every worker answers a ping
+PING_TIMEOUT = 1.0  # s: one round of pings
+HOME_SETTLE_S = 0.5  # s: robots sent home publish their new odometry before their traffic is released
+SCRATCH_DB = "bench_coordination"  # on DATABASE_URL's PostgreSQL server
+POSTGRES_SCHEMES = {"postgres", "postgresql"}
 MODES = {
     "quick": {"counts": [2, 4, 8], "time_scale": 2.0, "alloc_rounds": 10, "lone": 2},
     "full": {"counts": [2, 4, 8, 16, 32], "time_scale": 2.0, "alloc_rounds": 50, "lone": 3},
@@ -47,18 +66,96 @@ GOAL_X = (3.0, 27.0)  # x range of the goals: clear of the robots parked along t
 FLEET_ORDER = ("husky", "tb", "tiago")
 
 
-def setup_django(db_path: str) -> None:
-    os.environ["DATABASE_URL"] = f"sqlite:///{db_path}"
+def admin(url: str, *statements: str) -> None:
+    """Run statements on the PostgreSQL server of url, outside a transaction (as CREATE DATABASE must)."""
+    import psycopg
+
+    with psycopg.connect(urlparse(url)._replace(scheme="postgresql").geturl(), autocommit=True) as conn:
+        for statement in statements:
+            conn.execute(statement)
+
+
+@contextmanager
+def database() -> Iterator[str]:
+    """The DATABASE_URL the bench runs on: a scratch database on DATABASE_URL's PostgreSQL server (dropped at
+    the end, with whatever connections are left), else a SQLite file in a temporary directory."""
+    url = os.environ.get("DATABASE_URL", "")
+    if urlparse(url).scheme not in POSTGRES_SCHEMES:
+        with tempfile.TemporaryDirectory(prefix="bench-coord-") as tmp:
+            yield f"sqlite:///{os.path.join(tmp, 'db.sqlite3')}"
+        return
+    drop = f"DROP DATABASE IF EXISTS {SCRATCH_DB} WITH (FORCE)"
+    admin(url, drop, f"CREATE DATABASE {SCRATCH_DB}")
+    try:
+        yield urlparse(url)._replace(path=f"/{SCRATCH_DB}").geturl()
+    finally:
+        admin(url, drop)
+
+
+def setup_django(database_url: str) -> None:
+    """Django on the bench's database, executing on the Celery queue of this run, with keys of its own.
+
+    All of it is said in the environment, which the workers are started with (fleet.processes.fleet_env)."""
+    tag = f"bench-coord-{os.getpid()}-{uuid.uuid4().hex[:6]}"
+    os.environ.update(
+        DATABASE_URL=database_url,
+        FLEET_EXECUTE="celery",
+        FLEET_EXECUTE_QUEUE=tag,
+        FLEET_EXEC_KEY_PREFIX=f"bench:coord:{os.getpid()}",
+        FLEET_REDIS_PREFIX=tag,  # a portal on the same Redis sees none of the bench's poses and pushes
+        FLEET_WORLD=WORLD,
+    )
     os.environ.setdefault("DJANGO_SETTINGS_MODULE", "fleet.settings")
     import django
-    from django.conf import settings
     from django.core.management import call_command
 
     django.setup()
     call_command("migrate", verbosity=0)
-    settings.FLEET_EXECUTE = "thread"  # the engine runs here, a thread per robot
-    settings.FLEET_EXEC_KEY_PREFIX = f"bench:coord:{os.getpid()}"
-    settings.FLEET_WORLD = WORLD
+
+
+def worker_command(queue: str, name: str, threads: int) -> list[str]:
+    """A Celery worker on the bench's queue, with a threads pool (an executor blocks a thread while its robot
+    drives); without its banner, and without gossip and mingle, which the bench does not need and which slow
+    its start."""
+    return [
+        *(sys.executable, "-m", "celery", "-A", "fleet", "-q", "worker", "-Q", queue, "-n", name),
+        *("-P", "threads", "-c", str(threads), "-l", "warning", "--without-gossip", "--without-mingle"),
+    ]
+
+
+def wait_ready(procs: list, names: list[str]) -> None:
+    """Wait (bounded) until every worker answers a ping, so that the first run does not time their start."""
+    from fleet.celery import app
+
+    waiting, deadline = set(names), time.monotonic() + WORKER_START_TIMEOUT
+    while waiting:
+        if any(proc.poll() is not None for proc in procs):
+            raise RuntimeError("a Celery worker exited while starting (its log is above)")
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"Celery workers not up within {WORKER_START_TIMEOUT:g} s: {sorted(waiting)}")
+        for reply in app.control.ping(destination=sorted(waiting), timeout=PING_TIMEOUT):
+            waiting -= reply.keys()
+
+
+@contextmanager
+def executor_workers(count: int, threads: int) -> Iterator[None]:
+    """count Celery worker processes of threads threads each, sharing the bench's database, Redis and keys;
+    each ended at the end (SIGTERM to its process group, SIGKILL after fleet.processes.STOP_GRACE_S)."""
+    from django.conf import settings
+
+    from fleet.processes import end, fleet_env, start
+
+    queue, env = settings.FLEET_EXECUTE_QUEUE, fleet_env()
+    names = [f"{queue}-{i}@{socket.gethostname()}" for i in range(count)]
+    procs = []
+    try:
+        for name in names:
+            procs.append(start(worker_command(queue, name, threads), env))
+        wait_ready(procs, names)
+        yield
+    finally:
+        for proc in procs:
+            end(proc)
 
 
 def pick(names: list[str], n: int) -> list[str]:
@@ -108,15 +205,8 @@ def reset(sim, robots: dict, names) -> None:
     """Put robots back on their start poses (in the simulator, and in the portal's pose store and traffic)."""
     from execution import traffic
 
-    def teleport() -> None:
-        for name in names:
-            body = sim.fleet.robots[name].body.body
-            x, y, yaw = sim.fleet.robots[name].start
-            body.position, body.angle, body.velocity, body.angular_velocity = (x, y), yaw, (0, 0), 0.0
-            sim.fleet.physics.space.reindex_shapes_for_body(body)
-
-    sim.call(teleport)
-    time.sleep(0.5)
+    sim.home(names)
+    time.sleep(HOME_SETTLE_S)
     for name in names:
         traffic.release(robots[name], sim.pose(name))
 
@@ -127,7 +217,7 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
     from execution.instructions import submit
     from execution.models import Instruction
 
-    contacts0, deadlocks0 = len(sim.call(lambda: list(sim.fleet.physics.contacts))), traffic.deadlocks()
+    contacts0, deadlocks0 = sim.contacts(), traffic.deadlocks()
     started = time.time()
     sent = {}
     for name, (x, y) in goals.items():
@@ -150,7 +240,7 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
     makespan = (max(finished.values(), default=time.time()) - started) * time_scale
     return {
         "robots": len(goals),
-        "contacts": len(sim.call(lambda: list(sim.fleet.physics.contacts))) - contacts0,
+        "contacts": sim.contacts() - contacts0,
         "deadlocks": traffic.deadlocks() - deadlocks0,
         "completion": round(reached / len(goals), 3),
         "makespan_s": round(makespan, 1),
@@ -173,12 +263,12 @@ def crossing(cfg: dict) -> dict:
     from django.contrib.auth.models import User
 
     from fleetcore.world import load_world
-    from simworker.testing import running_world
+    from simworker.testing import WorldProcess
 
     user = User.objects.create_superuser("bench", password="bench-coordination")
     world, rng, out = load_world(WORLD), random.Random(16), {}
     scale = cfg["time_scale"]
-    with running_world(WORLD, time_scale=scale) as sim:
+    with WorldProcess(WORLD, time_scale=scale) as sim:
         robots = register(sim)
         for n in cfg["counts"]:
             names = pick(sorted(robots), n)
@@ -257,15 +347,32 @@ def allocation_ms(rounds: int) -> dict:
     return {"p50": round(statistics.median(times), 1), "p99": round(p99, 1), "robots": 1000, "rounds": rounds}
 
 
+def arguments(argv: list[str] | None):
+    """The components' command line, and which robot counts to run and on how many worker processes."""
+    parser = component.parser(__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="+", help="robot counts to run (default: the mode's)")
+    parser.add_argument(
+        "--workers", type=int, default=WORKERS, help="Celery worker processes for the executors"
+    )
+    return parser.parse_args(argv)
+
+
 def main(argv: list[str] | None = None) -> dict:
-    args = component.parser(__doc__.splitlines()[0]).parse_args(argv)
-    cfg = MODES[args.mode]
-    with tempfile.TemporaryDirectory(prefix="bench-coord-") as tmp:
-        setup_django(os.path.join(tmp, "db.sqlite3"))
+    args = arguments(argv)
+    cfg = {**MODES[args.mode], "counts": args.counts or MODES[args.mode]["counts"]}
+    threads = math.ceil(max(cfg["counts"]) / args.workers)  # a thread for every robot driving at once
+    with database() as url:
+        setup_django(url)
+        from django.db import connection, connections
+
         started = time.time()
-        data = {"mode": args.mode, "coordination": crossing(cfg)}
+        data = {"mode": args.mode}
+        with executor_workers(args.workers, threads):
+            data["coordination"] = crossing(cfg)
         data["allocation_ms_1000"] = allocation_ms(cfg["alloc_rounds"])
+        data["executors"] = {"workers": args.workers, "threads": threads, "database": connection.vendor}
         data["seconds"] = round(time.time() - started)
+        connections.close_all()
     component.write(args.out, RESULT_FILE, data)
     print(f"[coordination] wrote {args.out / RESULT_FILE}", flush=True)
     return data

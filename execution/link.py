@@ -93,6 +93,7 @@ class RobotLink:
         self.start = tuple(robot.start_pose) if robot.start_pose else (0.0, 0.0, 0.0)
         self.local = None  # the last odometry pose, in the odometry frame
         self.poses = Latest()
+        self.clock = motion.ClockRate()  # its clock against ours (a simulator may run faster than real time)
         self.nav_status = Latest()
         self.client = None
         self._subs = []
@@ -128,6 +129,7 @@ class RobotLink:
     def _on_odom(self, msg: dict) -> None:
         self.local = geometry.pose_of(msg)
         self.poses.put(geometry.compose(self.start, self.local))
+        self.clock.update(time.monotonic(), motion.stamp_of(msg))
 
     def _on_amcl(self, msg: dict) -> None:
         """Move the odometry origin so that the current odometry pose lands on the amcl estimate."""

@@ -64,8 +64,8 @@ NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
-EARLY_S = 0.5  # s a robot may set off on a stretch before the time its plan gives
-PLANNED_SPEED = 0.7  # of the commanded speed: turns on the spot and ramps make robots slower than their top
+EARLY_S = 1.0  # s a robot may set off on a stretch before the time its plan gives
+PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
 
 class Replan(Exception):
@@ -404,7 +404,8 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
 
     Returns "" at the goal, or words on the free spot it stopped at when a robot stood on the goal."""
     robot = session.robot
-    speed = limits.linear * factor * PLANNED_SPEED
+    _measure_clock(session)
+    speed = limits.linear * factor * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
     around: set[int] = set()
     reroutes = 0
     here = session.pose()[:2]
@@ -430,6 +431,15 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         release(robot, session.link.poses.value)
 
 
+def _measure_clock(session: Session) -> None:
+    """Read odometry until the robot's clock rate is known (a link opened just now has not measured it), so
+    its plan is timed at its real pace; a robot whose stamps say nothing is planned at rate 1."""
+    deadline = time.monotonic() + 3 * motion.RATE_SPAN_S
+    while not session.link.clock.measured and time.monotonic() < deadline:
+        session.pose()
+        session.check()
+
+
 def _moved(goal, end) -> str:
     distance = math.dist(goal, end)
     if distance < 0.05:
@@ -439,18 +449,23 @@ def _moved(goal, end) -> str:
 
 def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
-    asked for, or the free spot next to it when that was taken). Replan once the plan is REPLAN_S old.
+    asked for, or the free spot next to it when that was taken). A plan longer than the window is replanned
+    once it is REPLAN_S old.
 
-    A robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower than the
-    robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then there."""
+    A robot the portal drives never sets off on a stretch more than EARLY_S before its planned time: the plan
+    is slower than the robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left
+    by then there. A nav stack drives at a pace of its own, which the plan can only guess: the claims alone
+    hold it."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
+    windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
-        if i and time.time() - planned > REPLAN_S:
+        if i and windowed and time.time() - planned > REPLAN_S:
             raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
-        if hold or time.time() < due - EARLY_S:  # a planned wait, or early: keep to the plan's times
+        early = not nav and time.time() < due - EARLY_S  # a nav stack keeps a pace of its own: not timed
+        if hold or early:  # a planned wait, or early: keep to the plan's times
             _hold(session, t if hold else due - EARLY_S)
         due = t
         if hold:

@@ -234,6 +234,49 @@ def stamp(t: float, ros_version: int) -> dict:
     return {"secs": sec, "nsecs": nanos} if ros_version == 1 else {"sec": sec, "nanosec": nanos}
 
 
+def stamp_of(msg: dict) -> float | None:
+    """A message's header stamp in seconds, in either ROS version's field names; None when missing or
+    malformed (robots are untrusted input)."""
+    head = msg.get("header") if isinstance(msg, dict) else None
+    stamp_field = head.get("stamp") if isinstance(head, dict) else None
+    if not isinstance(stamp_field, dict):
+        return None
+    sec = stamp_field.get("secs", stamp_field.get("sec"))
+    nanos = stamp_field.get("nsecs", stamp_field.get("nanosec", 0))
+    if not isinstance(sec, int | float) or not isinstance(nanos, int | float):
+        return None
+    return sec + nanos / 1e9
+
+
+RATE_SPAN_S = 0.5  # s of wall time a clock rate is measured over
+RATE_BOUNDS = (0.25, 16.0)  # clock rates believed: a simulator's time scale; beyond these, a stamp is wrong
+
+
+class ClockRate:
+    """How fast a robot's clock runs against ours, from the stamps of its messages: 1 for a real robot, the
+    time scale of a simulator running faster than real time. Plans are made in wall time; a robot's speed in
+    wall time is its speed times this rate. 1 until measured, and whenever stamps are missing or jump."""
+
+    def __init__(self) -> None:
+        self.rate = 1.0
+        self.measured = False
+        self._mark: tuple[float, float] | None = None  # (wall, stamp) the current span began at
+
+    def update(self, wall: float, stamp_s: float | None) -> None:
+        if stamp_s is None or stamp_s <= 0:
+            return
+        if self._mark is None or stamp_s < self._mark[1]:
+            self._mark = (wall, stamp_s)
+            return
+        span = wall - self._mark[0]
+        if span < RATE_SPAN_S:
+            return
+        rate = (stamp_s - self._mark[1]) / span
+        if RATE_BOUNDS[0] <= rate <= RATE_BOUNDS[1]:
+            self.rate, self.measured = rate, True
+        self._mark = (wall, stamp_s)
+
+
 def header(frame: str, t: float, ros_version: int) -> dict:
     head = {"stamp": stamp(t, ros_version), "frame_id": frame}
     return {"seq": 0, **head} if ros_version == 1 else head

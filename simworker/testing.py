@@ -1,22 +1,51 @@
-"""Run a simulated world in a background thread, for tests and scripts.
+"""Run a simulated world in a background thread, or in a child process, for tests and scripts.
 
 with running_world("paper") as sim:
     url = sim.urls["turtlebot"]       # ws://127.0.0.1:<free port>
     x, y, yaw = sim.pose("turtlebot")
+
+WorldProcess runs the same world in a process of its own, so that a busy caller (a bench driving dozens of
+robots) and the physics loop do not share one interpreter's lock:
+
+with WorldProcess("warehouse", time_scale=2.0) as sim:
+    sim.urls, sim.pose("husky1"), sim.contacts(), sim.home(["husky1"])
 """
 
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import multiprocessing
+import signal
 import socket
 import threading
+import time
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
+from multiprocessing.connection import Connection
 
 from simworker.fleet import SimFleet
 
-START_TIMEOUT = 10.0
+START_TIMEOUT = 10.0  # s: a world in a thread is up
+PROCESS_START_TIMEOUT = 60.0  # s: a world in a spawned process is up (it imports the simulator afresh)
+REPLY_TIMEOUT = 5.0  # s: the world process answers a request
+STOP_TIMEOUT = 10.0  # s: the world process ends after SIGTERM (then after SIGKILL)
+READY = 0  # the sequence number of the world process's first message: its URLs, or why it did not start
+
+
+def send_home(fleet: SimFleet, names: Iterable[str]) -> None:
+    """Teleport robots back to their start poses, at rest (call from the fleet's loop). Their odometry
+    moves with them: it is measured from the start pose."""
+    for name in names:
+        body = fleet.robots[name].body.body
+        x, y, yaw = fleet.robots[name].start
+        body.position, body.angle, body.velocity, body.angular_velocity = (x, y), yaw, (0, 0), 0.0
+        fleet.physics.space.reindex_shapes_for_body(body)
+
+
+def contact_count(fleet: SimFleet) -> int:
+    """Robot-robot contacts the physics has counted so far."""
+    return len(fleet.physics.contacts)
 
 
 def free_port() -> int:
@@ -98,3 +127,126 @@ def running_world(
         yield handle
     finally:
         handle.stop()
+
+
+# What the world process answers: request name -> fn(fleet, *args), run on the fleet's loop.
+REQUESTS = {"pose": SimFleet.pose, "contacts": contact_count, "home": send_home}
+
+
+class WorldProcess:
+    """A world run in a child process ("spawn": no Django state or threads of the caller's are inherited).
+
+    Requests go over a pipe as (sequence number, name, args) and come back as (sequence number, ok, value);
+    a lock lets several threads share the handle, and a reply that comes after its request timed out is
+    skipped by its sequence number.
+    """
+
+    def __init__(self, world: str = "paper", **options) -> None:
+        """options as running_world's (host, port_base, extra, endpoints, time_scale, SimFleet's options)."""
+        self.world, self.options = world, options
+        self.urls: dict[str, str] = {}
+        self.process: multiprocessing.process.BaseProcess | None = None
+        self._conn: Connection | None = None
+        self._lock = threading.Lock()
+        self._seq = READY
+
+    def __enter__(self) -> WorldProcess:
+        return self.start()
+
+    def __exit__(self, *exc_info) -> None:
+        self.stop()
+
+    def start(self) -> WorldProcess:
+        """Start the child and wait (bounded) for its servers to listen; raise RuntimeError if they do not."""
+        context = multiprocessing.get_context("spawn")
+        self._conn, child_end = context.Pipe()
+        self.process = context.Process(
+            target=serve_world, args=(child_end, self.world, self.options), name="simworker", daemon=True
+        )
+        self.process.start()
+        child_end.close()  # only the child holds it now: its death shows here as the end of the pipe
+        try:
+            self.urls = self._reply(READY, "start", PROCESS_START_TIMEOUT)
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def pose(self, robot: str) -> tuple[float, float, float]:
+        """Return the ground-truth (x, y, yaw) of a robot in the map frame."""
+        return self._request("pose", robot)
+
+    def contacts(self) -> int:
+        """Robot-robot contacts the physics has counted since the world started."""
+        return self._request("contacts")
+
+    def home(self, names: Iterable[str]) -> None:
+        """Teleport these robots back to their start poses (send_home)."""
+        self._request("home", list(names))
+
+    def _request(self, name: str, *args):
+        with self._lock:
+            self._seq += 1
+            self._conn.send((self._seq, name, args))
+            return self._reply(self._seq, name, REPLY_TIMEOUT)
+
+    def _reply(self, seq: int, name: str, timeout: float):
+        """The value of reply `seq` (older replies skipped); raise if it failed, or does not come in time."""
+        deadline = time.monotonic() + timeout
+        while self._conn.poll(max(0.0, deadline - time.monotonic())):
+            try:
+                got, ok, value = self._conn.recv()
+            except EOFError:
+                raise RuntimeError(f"world process: {name}: the process ended") from None
+            if got == seq:
+                if not ok:
+                    raise RuntimeError(f"world process: {name}: {value}")
+                return value
+        raise TimeoutError(f"world process: {name}: no answer within {timeout:g} s")
+
+    def stop(self) -> None:
+        """SIGTERM the child (its loop closes the servers), SIGKILL it if it lingers; idempotent."""
+        if self.process is not None and self.process.pid is not None:
+            self.process.terminate()
+            self.process.join(STOP_TIMEOUT)
+            if self.process.is_alive():
+                self.process.kill()
+                self.process.join(STOP_TIMEOUT)
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+
+
+def serve_world(conn: Connection, world: str, options: dict) -> None:
+    """The world process: run the fleet; answer requests on its loop; SIGTERM or SIGINT stops it cleanly."""
+    try:
+        fleet = SimFleet(world, **options)
+        asyncio.run(fleet.run(on_ready=lambda running: _serve_ready(running, conn)))
+    except BaseException as exc:  # before READY, the parent's start() reports it; after, it sees the pipe end
+        with suppress(OSError):  # the parent may have gone
+            conn.send((READY, False, repr(exc)))
+        raise
+
+
+def _serve_ready(fleet: SimFleet, conn: Connection) -> None:
+    """The servers listen: stop on signals, answer requests, tell the parent the URLs."""
+    loop = asyncio.get_running_loop()
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(signum, fleet.request_stop)
+    loop.add_reader(conn.fileno(), _answer, fleet, conn)
+    conn.send((READY, True, fleet.urls))
+
+
+def _answer(fleet: SimFleet, conn: Connection) -> None:
+    """Answer one request from the pipe; stop the fleet when the parent has gone."""
+    try:
+        seq, name, args = conn.recv()
+    except EOFError:
+        asyncio.get_running_loop().remove_reader(conn.fileno())
+        fleet.request_stop()
+        return
+    try:
+        reply = (seq, True, REQUESTS[name](fleet, *args))
+    except Exception as exc:  # the caller's error (an unknown robot), not the world's
+        reply = (seq, False, repr(exc))
+    conn.send(reply)

@@ -158,3 +158,28 @@ def test_a_destination_keeps_its_heading_and_refuses_a_bad_one():
     for bad in ("north", float("nan"), True):
         with pytest.raises(StepError, match="yaw"):
             Destination.from_dict({"name": "", "x": 1, "y": 2, "yaw": bad})
+
+
+def test_a_robot_clock_rate_is_read_from_its_stamps_and_bad_stamps_change_nothing():
+    clock = motion.ClockRate()
+    assert clock.rate == 1.0 and not clock.measured
+    for i in range(40):  # a simulator at 2x: 0.05 s of wall time per 0.1 s of its stamps
+        clock.update(
+            100.0 + 0.05 * i, motion.stamp_of({"header": {"stamp": {"sec": 7, "nanosec": i * 10**8}}})
+        )
+    assert clock.measured and clock.rate == pytest.approx(2.0)
+    ros1 = {"header": {"seq": 1, "stamp": {"secs": 3, "nsecs": 5 * 10**8}}}
+    assert motion.stamp_of(ros1) == 3.5
+    for garbage in (
+        {},
+        {"header": "x"},
+        {"header": {"stamp": {"sec": "1"}}},
+        {"header": {"stamp": None}},
+        [],
+    ):
+        assert motion.stamp_of(garbage) is None
+        clock.update(200.0, motion.stamp_of(garbage))
+    assert clock.rate == pytest.approx(2.0)
+    clock.update(300.0, 1.0)  # the stamps jumped back (a restarted robot): a new span, the rate kept
+    clock.update(310.0, 1.0 + 10 * 1000.0)  # 1000x: not believable, ignored
+    assert clock.rate == pytest.approx(2.0)

@@ -5,23 +5,20 @@ The robot here has no command timeout (as many real robots do not): without the 
 drive on with the last Twist it got.
 """
 
-import contextlib
 import math
 import os
 import signal
-import subprocess
 import sys
 import time
 import uuid
-from pathlib import Path
 
 import pytest
-from django.db import connection
 
 from alerts.models import Alert
 from execution import coordination, traffic, watchdog
 from execution.instructions import submit
 from execution.models import Execution, Instruction
+from fleet import processes
 from tests.execution.helpers import (
     at_rest,
     parse,
@@ -33,44 +30,15 @@ from tests.execution.helpers import (
 )
 
 pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
-ROOT = Path(__file__).resolve().parents[2]
 AT_REST_S, FINAL_S = 2.0, 10.0  # issue 14: robot at rest, instruction final, after its executor is lost
 
 
-def database_url() -> str:
-    """The test database as a DATABASE_URL the worker subprocess can open."""
-    s = connection.settings_dict
-    if s["ENGINE"].endswith("sqlite3"):
-        if "memory" in str(s["NAME"]):
-            pytest.skip("the test database is in memory; a worker process cannot share it")
-        return f"sqlite:///{s['NAME']}"
-    return f"postgres://{s['USER']}:{s['PASSWORD'] or ''}@{s['HOST'] or '127.0.0.1'}:{s['PORT'] or 5432}/{s['NAME']}"
-
-
-def subprocess_env(settings) -> dict:
-    """What a fleet process needs to share the test's database, Redis and keys."""
-    return {
-        **os.environ,
-        "DATABASE_URL": database_url(),
-        "REDIS_URL": settings.REDIS_URL,
-        "FLEET_EXEC_KEY_PREFIX": settings.FLEET_EXEC_KEY_PREFIX,
-        "DJANGO_SETTINGS_MODULE": "fleet.settings",
-    }
-
-
-def start(command: list[str], env: dict) -> subprocess.Popen:
-    return subprocess.Popen(command, cwd=ROOT, env=env, start_new_session=True)
-
-
-def end(proc: subprocess.Popen) -> None:
-    """SIGTERM the process group, SIGKILL it if it does not go within 10 s."""
-    with contextlib.suppress(ProcessLookupError):  # a test may have killed it already
-        os.killpg(proc.pid, signal.SIGTERM)
+def subprocess_env() -> dict:
+    """What a fleet process needs to share the test's database, Redis and keys (fleet.processes)."""
     try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
+        return processes.fleet_env()
+    except ValueError as exc:  # an in-memory test database
+        pytest.skip(f"a worker process cannot share the test database: {exc}")
 
 
 @pytest.fixture
@@ -92,21 +60,21 @@ def celery_worker(turtle_world, settings):
         "-l",
         "warning",
     ]
-    proc = start(command, subprocess_env(settings))
+    proc = processes.start(command, subprocess_env())
     try:
         yield proc
     finally:
-        end(proc)
+        processes.end(proc)
 
 
 @pytest.fixture
 def scheduler_process(turtle_world, settings):
     """`manage.py scheduler` as `make run` starts it: the process that stays up and watches the executors."""
-    proc = start([sys.executable, "manage.py", "scheduler"], subprocess_env(settings))
+    proc = processes.start([sys.executable, "manage.py", "scheduler"], subprocess_env())
     try:
         yield proc
     finally:
-        end(proc)
+        processes.end(proc)
 
 
 def at_rest_after(sim, name: str, moment: float) -> bool:
