@@ -249,13 +249,13 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
 
 
 def estimated_s(robot, start, goal) -> float:
-    from execution import route
+    from execution import route, traffic
     from fleetcore.steps import speed_factor
 
     length = route.planned_length(robot, start, goal) or math.dist(start, goal)
     speed = robot.max_linear * speed_factor(SPEED)
-    if robot.bindings.filter(action="navigate").exists():
-        speed = min(robot.max_linear, 0.22) * 0.5  # as execution.handlers drives nav stacks
+    if robot.bindings.filter(action="navigate").exists():  # the pace its nav stack kept in the run together
+        speed = traffic.known_pace(robot.pk) or min(robot.max_linear, 0.22) * traffic.NAV_PACE_GUESS
     return length / speed
 
 

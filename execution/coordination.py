@@ -92,7 +92,7 @@ class Heartbeat:
     def __init__(self, lock: RobotLock, every: float = HEARTBEAT_S, lively: float = LIVELY_S) -> None:
         self.lock, self.every, self.lively = lock, every, lively
         self.renewed = self.alive_until = 0.0
-        self.lost = False
+        self.lost = self.quiet = False
         self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"heartbeat {lock.key}", daemon=True)
 
@@ -112,6 +112,15 @@ class Heartbeat:
         self.alive_until = time.monotonic() + self.lively
 
     @property
+    def why_lost(self) -> str:
+        """Why the lock is not ours, in a person's words (for the execution's outcome)."""
+        if self.lost:
+            return "its lock on the robot was taken by another executor"
+        if self.quiet:
+            return f"its command loop did not run for {self.lively:g} s, so its lock on the robot lapsed"
+        return f"its lock on the robot was not renewed for {self.lock.ttl_ms / 1000:g} s (a starved process?)"
+
+    @property
     def held(self) -> bool:
         """Whether the lock is still ours: never refused, and confirmed within its time to live."""
         return not self.lost and time.monotonic() - self.renewed < self.lock.ttl_ms / 1000
@@ -123,7 +132,8 @@ class Heartbeat:
 
     def _run(self) -> None:
         while not self._stopping.wait(self.every):
-            if time.monotonic() > self.alive_until:
+            self.quiet = time.monotonic() > self.alive_until
+            if self.quiet:
                 continue  # the command loop is hung: let the lock lapse so the watchdog takes over
             sent = time.monotonic()
             try:

@@ -202,10 +202,12 @@ def navigate_to(session: Session, goal: tuple[float, float], limits: motion.Limi
     """Hand the reserved route's goals to the robot's nav stack; when it makes no progress, send them afresh
     (a new plan from where the robot is, with what its sensors see now), up to STALL_TRIES times. A stack that
     aborts has tried its own recoveries already: that ends the step."""
-    nav_speed = min(limits.linear, 0.22) * 0.5  # nav stacks drive at their own (often slow) speed
+    guess = (
+        min(limits.linear, 0.22) * traffic.NAV_PACE_GUESS
+    )  # nav stacks drive at their own (often slow) speed
     for attempt in range(STALL_TRIES + 1):
         try:
-            return traffic.travel(session, goal, limits, nav_speed / limits.linear, nav=True)
+            return traffic.travel(session, goal, limits, guess / limits.linear, nav=True)
         except Stalled as exc:
             _stalled(session, exc, attempt)
     return ""

@@ -44,6 +44,10 @@ class LinkLost(StepFailed):
     """The robot's link dropped under the step: nothing we send reaches it until the link is back."""
 
 
+class Aborted(StepFailed):
+    """The robot's own stack gave up on a goal (move_base, nav2: after its own recoveries)."""
+
+
 class Stalled(StepFailed):
     """The robot is commanded to move but makes no progress: something the plan did not know is in the way."""
 
@@ -105,7 +109,7 @@ class Session:
     def check(self) -> None:
         """Raise Interrupted if the robot was stopped or preempted, or its lock was lost; tell the heartbeat."""
         if not self.heartbeat.held:
-            raise Interrupted("failed", "executor lost: its lock on the robot lapsed")
+            raise Interrupted("failed", f"executor lost: {self.heartbeat.why_lost}")
         self.heartbeat.beat()
         try:
             self._check_flags()
@@ -260,6 +264,8 @@ def follow_goal(
             outcome = session.link.goal_outcome(goal, pose)
             if outcome == "succeeded":
                 return
+            if outcome == "failed":
+                raise Aborted(f"{session.robot.name}: {what} {NAV_WORDS[outcome]}")
             if outcome in NAV_WORDS:
                 raise StepFailed(f"{session.robot.name}: {what} {NAV_WORDS[outcome]}")
             verdict = progress.update(pose)

@@ -35,7 +35,7 @@ from redis.exceptions import WatchError
 import live
 from execution import coordination, route, spots
 from execution.models import Execution
-from execution.steps import STALL_S, Session, StepFailed, drive, navigate, travel_time
+from execution.steps import STALL_S, Aborted, Session, StepFailed, drive, navigate, travel_time
 from fleetcore import motion
 from fleetcore import traffic as plain
 from robots import poses as pose_store
@@ -64,6 +64,9 @@ NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
+NAV_PACE_GUESS = 0.5  # of a nav stack's top speed (at most 0.22 m/s): its pace until one is measured
+PACE_MIN_M = 0.3  # m: a nav stretch shorter than this says little of the stack's pace
+PACE_WEIGHT = 0.5  # of a new measure of a nav stack's pace against what was known
 EARLY_S = 1.0  # s a robot may set off on a stretch before the time its plan gives
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
@@ -144,7 +147,8 @@ def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
         if pk == robot_id or pk in around:
             continue
         for c, r, t0, t1 in entry["cells"]:
-            table.reserve(str(pk), [(c, r)], t0, t1)
+            if t1 > now - 1.0:  # what it has driven past holds nobody up
+                table.reserve(str(pk), [(c, r)], t0, t1)
         goal = tuple(entry["goal"])
         still.append((plain.Capsule(goal, goal, entry["r"], str(pk)), entry["at"]))
     for pk, entry in claims.items():
@@ -243,8 +247,11 @@ def _timed(points, speed: float, t0: float) -> list[tuple]:
 def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float) -> None:
     table = plain.ReservationTable()
     table.reserve_path(str(robot.pk), path, radius, pad(now))
+    busy = table.intervals()  # merged per cell: a few intervals each, not one per stretch that touches it
     cells = [
-        [c, r, round(t0, 2), round(t1, 2)] for (c, r), entries in table.cells.items() for t0, t1, _ in entries
+        [c, r, round(t0, 2), round(t1, 2)]
+        for (c, r), spans in busy.cells.items()
+        for t0, t1 in zip(spans.starts, spans.ends, strict=True)
     ]
     x, y, at = path[-1]
     entry = {"cells": cells, "goal": [x, y], "r": radius, "at": at, "expires": at + WAIT_LIMIT_S * 2}
@@ -405,7 +412,8 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     Returns "" at the goal, or words on the free spot it stopped at when a robot stood on the goal."""
     robot = session.robot
     _measure_clock(session)
-    speed = limits.linear * factor * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
+    pace = (nav and known_pace(robot.pk)) or limits.linear * factor  # m per second of the robot's clock
+    speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
     around: set[int] = set()
     reroutes = 0
     here = session.pose()[:2]
@@ -454,8 +462,9 @@ def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
 
     A robot the portal drives never sets off on a stretch more than EARLY_S before its planned time: the plan
     is slower than the robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left
-    by then there. A nav stack drives at a pace of its own, which the plan can only guess: the claims alone
-    hold it."""
+    by then there. A nav stack drives at a pace of its own, which the plan learns (known_pace): the claims
+    alone hold it. A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
+    an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
     windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
@@ -477,7 +486,19 @@ def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
         distance = math.dist(pose[:2], target)
         if nav:
             limit = travel_time(distance * 1.5, math.pi, limits, factor)
-            navigate(session, *target, limit, stall_s=NAV_STALL_S)
+            sent = time.monotonic()
+            try:
+                navigate(session, *target, limit, stall_s=NAV_STALL_S)
+            except Aborted:
+                if last:
+                    raise
+                log.info(
+                    "traffic: %s's nav stack gave up on a corner of its route, %s: on to the next",
+                    robot.name,
+                    target,
+                )
+                continue
+            _note_pace(session, distance, time.monotonic() - sent)
         else:
             tolerance = motion.TOLERANCE if last else WAYPOINT_TOLERANCE
             controller = motion.GoToGoal(target, limits, factor, tolerance)
@@ -488,6 +509,23 @@ def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
                 stall_s=STALL_S,
                 goal=target,
             )
+
+
+def known_pace(robot_id: int) -> float | None:
+    """The pace a robot's nav stack was seen to keep (m per second of the robot's clock), None if never seen."""
+    raw = coordination.connection().hget(_key("pace"), str(robot_id))
+    return float(raw) if raw else None
+
+
+def _note_pace(session: Session, distance: float, elapsed: float) -> None:
+    """Learn the nav stack's pace from a stretch it drove (turns and ramps included): later plans are timed
+    by it. The stack chooses its own speed, which the portal can only observe."""
+    if distance < PACE_MIN_M or elapsed <= 0:
+        return
+    seen = distance / elapsed / session.link.clock.rate
+    known = known_pace(session.robot.pk)
+    pace = seen if known is None else PACE_WEIGHT * seen + (1 - PACE_WEIGHT) * known
+    coordination.connection().hset(_key("pace"), str(session.robot.pk), f"{pace:.4f}")
 
 
 def _hold(session: Session, until: float) -> None:

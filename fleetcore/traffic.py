@@ -15,6 +15,7 @@ Time is in seconds on one clock shared by everyone who reserves (the execution e
 from __future__ import annotations
 
 import bisect
+import functools
 import heapq
 import itertools
 import math
@@ -125,6 +126,13 @@ class Capsule:
     label: str = ""
 
 
+def _distance(p: Point, capsule: Capsule) -> float:
+    """From a point to a capsule's segment (to its centre when it is a disc: most are robots standing)."""
+    if capsule.a == capsule.b:
+        return math.dist(p, capsule.a)
+    return segment_distance(p, p, capsule.a, capsule.b)
+
+
 def approaches(
     p0: Point, p1: Point, radius: float, other: Capsule, margin: float = 0.0, slack: float = 1e-6
 ) -> bool:
@@ -145,7 +153,8 @@ def first_in_the_way(
     return None
 
 
-def disc_offsets(radius: float, cell: float = TRAFFIC_CELL) -> list[Cell]:
+@functools.cache
+def disc_offsets(radius: float, cell: float = TRAFFIC_CELL) -> tuple[Cell, ...]:
     """The cell offsets a disc of this radius centred in a cell may touch (cells whose square it reaches)."""
     n = math.ceil(radius / cell) + 1
     out = []
@@ -154,7 +163,7 @@ def disc_offsets(radius: float, cell: float = TRAFFIC_CELL) -> list[Cell]:
             gap_x, gap_y = max(0.0, (abs(dc) - 0.5) * cell), max(0.0, (abs(dr) - 0.5) * cell)
             if math.hypot(gap_x, gap_y) <= radius:
                 out.append((dc, dr))
-    return out
+    return tuple(out)
 
 
 def cell_of(point: Point, cell: float = TRAFFIC_CELL) -> Cell:
@@ -246,32 +255,43 @@ class ReservationTable:
         )
 
 
+class Spans:
+    """Sorted, disjoint time intervals (overlapping ones merged): when something is held."""
+
+    def __init__(self, intervals: Iterable[tuple[float, float]]) -> None:
+        merged: list[list[float]] = []
+        for a, b in sorted(intervals):
+            if merged and a <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], b)
+            else:
+                merged.append([a, b])
+        self.starts = [a for a, _ in merged]
+        self.ends = [b for _, b in merged]
+
+    def overlaps(self, lo: float, hi: float) -> bool:
+        """Whether some interval overlaps (lo, hi)."""
+        i = bisect.bisect_right(self.ends, lo)  # the first interval still going on after lo
+        return i < len(self.ends) and self.starts[i] < hi
+
+
 class Busy:
-    """When each cell is held by someone: sorted, merged intervals per cell (ReservationTable.intervals)."""
+    """When each cell is held by someone (ReservationTable.intervals), and when any of a set of cells is."""
 
     def __init__(self, held: dict[Cell, list[tuple[float, float]]]) -> None:
-        self.starts: dict[Cell, list[float]] = {}
-        self.ends: dict[Cell, list[float]] = {}
-        for c, spans in held.items():
-            merged: list[list[float]] = []
-            for a, b in sorted(spans):
-                if merged and a <= merged[-1][1]:
-                    merged[-1][1] = max(merged[-1][1], b)
-                else:
-                    merged.append([a, b])
-            self.starts[c] = [a for a, _ in merged]
-            self.ends[c] = [b for _, b in merged]
+        self.cells = {c: Spans(intervals) for c, intervals in held.items()}
 
     def taken(self, cells: Iterable[Cell], lo: float, hi: float) -> bool:
-        """Whether any of these cells is held at a time overlapping [lo, hi]."""
-        for c in cells:
-            ends = self.ends.get(c)
-            if ends is None:
-                continue
-            i = bisect.bisect_right(ends, lo)  # the first interval still going on after lo
-            if i < len(ends) and self.starts[c][i] < hi:
-                return True
-        return False
+        """Whether any of these cells is held at a time overlapping (lo, hi)."""
+        return any(c in self.cells and self.cells[c].overlaps(lo, hi) for c in cells)
+
+    def union(self, cells: Iterable[Cell]) -> Spans:
+        """When any of these cells is held (a footprint's: one look-up for it, then, instead of one per cell)."""
+        return Spans(
+            (a, b)
+            for c in cells
+            if c in self.cells
+            for a, b in zip(self.cells[c].starts, self.cells[c].ends, strict=True)
+        )
 
 
 def leg_slots(a, b, radius: float, pad, step: float = TRAFFIC_CELL):
@@ -309,7 +329,7 @@ class Clearance:
             self._gaps[c] = [
                 (since, gap)
                 for disc, since in self.standing
-                if (gap := segment_distance(p, p, disc.a, disc.b) - disc.r - self.radius) < TRAFFIC_CELL * 2
+                if (gap := _distance(p, disc) - disc.r - self.radius) < TRAFFIC_CELL * 2
             ]
         return self._gaps[c]
 
@@ -388,14 +408,14 @@ class SpaceTimeSearch:
         near_term = table.window(t0 + self.window_s)
         busy = near_term.intervals(robot)
         mine = {(s[0] + dc, s[1] + dr) for dc, dr in offsets}
-        feet: dict[tuple[Cell, bool], tuple[Cell, ...]] = {}
+        feet: dict[tuple[Cell, bool], Spans] = {}
 
-        def cells(c: Cell, own: bool = False) -> tuple[Cell, ...]:
-            """Its footprint at c, cached; own: less the room it stood on at the start (its own until it
-            has left it)."""
+        def held(c: Cell, own: bool = False) -> Spans:
+            """When others hold some of its footprint at c, cached; own: less the room it stood on at the
+            start (its own until it has left it)."""
             if (c, own) not in feet:
                 foot = [(c[0] + dc, c[1] + dr) for dc, dr in offsets]
-                feet[c, own] = tuple(x for x in foot if x not in mine) if own else tuple(foot)
+                feet[c, own] = busy.union(x for x in foot if not (own and x in mine))
             return feet[c, own]
 
         squeezed = near.gap(s, t0) < 0  # it starts nearer to a robot standing than it should come
@@ -411,7 +431,7 @@ class SpaceTimeSearch:
                 self._progress()
             _, _, state, t = heapq.heappop(openq)
             c = state[0]
-            if c == g and not busy.taken(cells(c), t - self.pad(t), FOREVER) and near.stays(c, t):
+            if c == g and not held(c).overlaps(t - self.pad(t), FOREVER) and near.stays(c, t):
                 return self._timed(state, parent, times, start, goal, near_term, robot)
             if t - t0 > self.horizon_s:
                 continue
@@ -421,7 +441,7 @@ class SpaceTimeSearch:
                     continue
                 t1 = t + d * tick
                 lo, hi, own = t - self.pad(t), t1 + self.pad(t1), c in mine
-                if busy.taken(cells(c, own), lo, hi) or (n != c and busy.taken(cells(n, own), lo, hi)):
+                if held(c, own).overlaps(lo, hi) or (n != c and held(n, own).overlaps(lo, hi)):
                     continue
                 if not near.may_move(c, n, t1, loose=squeezed and c in mine):
                     continue

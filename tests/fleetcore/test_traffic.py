@@ -148,6 +148,9 @@ def test_busy_intervals_agree_with_the_table():
         expected = table.holder([(0, 0)], lo, hi, "me") is not None
         assert busy.taken([(0, 0)], lo, hi) is expected, (lo, hi)
     assert not busy.taken([(1, 1)], 0.0, 9.0)  # its own reservations never hold it up
+    table.reserve("d", [(2, 2)], 2.5, 4.0)
+    either = table.intervals("me").union([(0, 0), (2, 2), (1, 1)])
+    assert (either.starts, either.ends) == ([1.0, 5.0], [4.0, 6.0])  # one footprint: one look-up
 
 
 def test_an_unreachable_goal_has_no_plan():
