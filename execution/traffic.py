@@ -197,8 +197,9 @@ def plan(
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
         still = [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
         goal = free_goal(robot, goal, radius, still, planner, start)
-        search = plain.SpaceTimeSearch(_passable(planner), radius, speed, pad(now))
-        path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
+        if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
+            search = plain.SpaceTimeSearch(_passable(planner), radius, speed, pad(now))
+            path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
@@ -412,7 +413,11 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     Returns "" at the goal, or words on the free spot it stopped at when a robot stood on the goal."""
     robot = session.robot
     _measure_clock(session)
-    pace = (nav and known_pace(robot.pk)) or limits.linear * factor  # m per second of the robot's clock
+    learned = known_pace(robot.pk) if nav else None
+    pace = learned or limits.linear * factor  # m per second of the robot's clock
+    timed = (
+        not nav or learned is not None
+    )  # a nav stack's pace unknown yet: it is not held to the plan's times
     speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
     around: set[int] = set()
     reroutes = 0
@@ -423,7 +428,7 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
             pose = session.pose()
             path = plan(robot, pose[:2], goal, speed, around, progress=session.check)
             try:
-                _follow(session, path, limits, factor, nav)
+                _follow(session, path, limits, factor, nav, timed)
                 return _moved(tuple(goal), path[-1][:2])
             except Replan:
                 continue
@@ -455,15 +460,15 @@ def _moved(goal, end) -> str:
     return f" (its spot was taken: it stopped {distance:.1f} m {plain.compass(goal, end)} of it)"
 
 
-def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
+def _follow(session: Session, path, limits, factor: float, nav: bool, timed: bool) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
     asked for, or the free spot next to it when that was taken). A plan longer than the window is replanned
     once it is REPLAN_S old.
 
-    A robot the portal drives never sets off on a stretch more than EARLY_S before its planned time: the plan
-    is slower than the robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left
-    by then there. A nav stack drives at a pace of its own, which the plan learns (known_pace): the claims
-    alone hold it. A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
+    A timed robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower
+    than the robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then
+    there. A nav stack drives at a pace of its own, which the plan learns (known_pace); until it is known, the
+    claims alone hold the robot. A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
@@ -473,7 +478,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
         if i and windowed and time.time() - planned > REPLAN_S:
             raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
-        early = not nav and time.time() < due - EARLY_S  # a nav stack keeps a pace of its own: not timed
+        early = timed and time.time() < due - EARLY_S
         if hold or early:  # a planned wait, or early: keep to the plan's times
             _hold(session, t if hold else due - EARLY_S)
         due = t

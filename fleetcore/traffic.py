@@ -453,9 +453,9 @@ class SpaceTimeSearch:
         return None
 
     def _distances(self, goal: Cell, start: Cell) -> dict[Cell, float]:
-        """Cells from which the goal is reachable on the static grid, with their distance to it (in cells)."""
-        if not self.passable(goal):
-            return {}
+        """Cells from which the goal is reachable on the static grid, with their distance to it (in cells).
+        The goal's and the start's cells count as free: the caller knows that those points are (a cell's
+        centre may be too near a wall while the point in it is not)."""
         dist = {goal: 0.0}
         heap = [(0.0, goal)]
         for pops in itertools.count():
