@@ -177,7 +177,7 @@ def crossing_goals(world, names: list[str], rng: random.Random) -> dict[str, tup
 
     specs = {r.name: r for r in world.robots}
     biggest = max(model(specs[n].model).circumscribed_radius for n in names)
-    planner = Planner(world.map, max(model(specs[n].model).inscribed_radius for n in names))
+    planner = Planner(world.map, biggest)  # room for the biggest robot to turn on the spot at its goal
     goals: list[tuple[float, float]] = []
     for _ in range(5000):
         if len(goals) == len(names):

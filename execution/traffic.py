@@ -5,9 +5,11 @@ The algorithms are plain (fleetcore.traffic); this module keeps their state in R
 1. Reserve (plan). When a robot sets off, its route is planned by space-time A* against the paths the other
    robots have reserved, the cells they hold now and the robots parked (forever, where they stand); its own
    timed path is then reserved under its id, until its step ends. First come, first reserved (prioritized
-   planning): a newcomer waits or detours, robots under way are never replanned by it.
-   Reservations are heeded WINDOW_S ahead (windowed cooperative A*), so a robot replans from where it is
-   before its window runs out (every REPLAN_S), against what the others reserved meanwhile.
+   planning), one plan at a time across the fleet: a newcomer waits or detours, robots under way are never
+   replanned by it. Reservations are heeded WINDOW_S ahead (windowed cooperative A*), so a robot replans from
+   where it is before its window runs out (every REPLAN_S), against what the others reserved meanwhile. Plans
+   are timed at the robot's real pace (its clock's rate; a nav stack's pace as seen), and a robot keeps to its
+   plan's times: it never sets off on a stretch well before the plan says.
 2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the room its footprint
    sweeps there. A claim is refused while another robot holds some of that room or stands in it; the robot
    then waits where it is and says for whom ("waiting for robot3"). Timing never has to be exact: a robot late
@@ -24,6 +26,7 @@ first: their goals never conflict with the reservations (execution.steps.navigat
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import logging
@@ -57,6 +60,9 @@ REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before goin
 BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
 BUSY = ("running", "queued")
 MAX_REROUTES = 4
+TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together are planned one by one)
+TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
+TURN_POLL_S = 0.02
 MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
 REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned (its window runs out)
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
@@ -181,13 +187,38 @@ def pad(t0: float):
 def plan(
     robot: Robot, start, goal, speed: float, around: set[int] = frozenset(), progress=None
 ) -> list[tuple]:
-    """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t).
+    """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t), in its
+    turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan."""
+    with planning_turn(robot, progress):
+        return _plan(robot, start, goal, speed, around, progress)
 
-    The table is read, then searched outside the lock (a long search must not hold up every claim), then the
-    path is reserved. Two robots planning at the same moment may miss each other's plans: the claims still
-    keep them apart. Without a map, or with no conflict-free plan within the search's bounds, the map route
-    (or the straight line) is reserved as it is.
-    """
+
+@contextlib.contextmanager
+def planning_turn(robot: Robot, progress=None):
+    """One plan at a time across the fleet (prioritized planning: robots sent together are planned in turn,
+    each against the paths reserved before it, instead of all against the same snapshot). A turn that does not
+    come within TURN_WAIT_S is not waited for (the claims still keep robots apart); a planner that dies lets
+    its turn lapse after TURN_TTL_MS."""
+    redis, token = coordination.connection(), coordination.new_token()
+    deadline = time.monotonic() + TURN_WAIT_S
+    held = False
+    while not (held := bool(redis.set(_key("turn"), token, nx=True, px=TURN_TTL_MS))):
+        if time.monotonic() > deadline:
+            log.info("traffic: %s plans without waiting longer for its turn", robot.name)
+            break
+        if progress is not None:
+            progress()
+        time.sleep(TURN_POLL_S)
+    try:
+        yield
+    finally:
+        if held:
+            redis.eval(coordination.RELEASE, 1, _key("turn"), token)
+
+
+def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress) -> list[tuple]:
+    """The plan itself: read the table, search, reserve. Without a map, or with no conflict-free plan within
+    the search's bounds, the map route (or the straight line) is reserved as it is."""
     planner = route.planner_for(robot)
     radius = reach(robot)
     now = time.time()
@@ -333,13 +364,16 @@ def wait_for(session: Session, start, end) -> None:
     """Claim the stretch, waiting while another robot is in the way; raise Reroute to break a deadlock or to
     go around a robot that is not under way; StepFailed after WAIT_LIMIT_S.
 
-    A waiting robot tries every WAIT_POLL_S; every NOTE_WAIT_S it reads the robots standing afresh, notes
-    whom it waits for, keeps its claim alive and looks for a cycle of waits."""
+    A waiting robot holds only the room it stands in (others may pass behind it) and tries every WAIT_POLL_S;
+    every NOTE_WAIT_S it reads the robots standing afresh, notes whom it waits for, keeps its claim alive and
+    looks for a cycle of waits."""
     robot, redis = session.robot, coordination.connection()
     started = same_since = noted = time.monotonic()
     last, name, everyone = None, "", None
     while (blocker := claim(robot, start, end, session.check, everyone)) is not None:
         now = time.monotonic()
+        if last is None:  # it waits where it stands: it holds that much room, not the stretch behind it
+            claim(robot, start, start, session.check, everyone)
         if blocker != last:
             same_since, last = now, blocker
             name = Robot.objects.filter(pk=blocker).values_list("name", flat=True).first() or f"#{blocker}"
