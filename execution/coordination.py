@@ -115,7 +115,7 @@ class Heartbeat:
     def why_lost(self) -> str:
         """Why the lock is not ours, in a person's words (for the execution's outcome)."""
         if self.lost:
-            return "its lock on the robot was taken by another executor"
+            return "its lock on the robot lapsed before it was renewed (it is not ours any more)"
         if self.quiet:
             return f"its command loop did not run for {self.lively:g} s, so its lock on the robot lapsed"
         return f"its lock on the robot was not renewed for {self.lock.ttl_ms / 1000:g} s (a starved process?)"
@@ -142,6 +142,7 @@ class Heartbeat:
                 log.warning("%s: heartbeat not renewed: %s", self.lock.key, exc)
                 continue
             if not renewed:
+                log.warning("%s: lost, %.1f s after its last renewal", self.lock.key, sent - self.renewed)
                 self.lost = True  # expired and taken, or released: never ours again
                 return
             self.renewed = sent

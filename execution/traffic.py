@@ -65,6 +65,8 @@ TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapse
 TURN_POLL_S = 0.02
 MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
 REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned (its window runs out)
+REST_M = 0.002  # m between two odometry poses of a robot at rest
+REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
 NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and its deadlock checks)
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
@@ -372,14 +374,14 @@ def wait_for(session: Session, start, end) -> None:
     last, name, everyone = None, "", None
     while (blocker := claim(robot, start, end, session.check, everyone)) is not None:
         now = time.monotonic()
-        if last is None:  # it waits where it stands: it holds that much room, not the stretch behind it
-            claim(robot, start, start, session.check, everyone)
         if blocker != last:
+            if last is None:  # it waits where it comes to rest: it holds that room, not the stretch behind
+                here = _at_rest(session)
+                claim(robot, here, here, session.check, everyone)
             same_since, last = now, blocker
             name = Robot.objects.filter(pk=blocker).values_list("name", flat=True).first() or f"#{blocker}"
             log.debug("traffic: %s waits for %s to go from %s to %s", robot.name, name, start, end)
             live.path(robot, None, name)
-            session.link.halt()
             noted = -math.inf
         if now - noted >= NOTE_WAIT_S:
             noted, everyone = now, standing(redis, {robot.pk})
@@ -396,6 +398,19 @@ def wait_for(session: Session, start, end) -> None:
         session.pose()  # a robot waiting still reads where it is (and odometry that stops fails the step)
     if last is not None:
         live.path(robot, None, None)
+
+
+def _at_rest(session: Session) -> tuple[float, float]:
+    """Stop the robot and read odometry until it has come to rest (or REST_LIMIT_S): where it stands."""
+    session.link.halt()
+    deadline = time.monotonic() + REST_LIMIT_S
+    before = session.pose()
+    while time.monotonic() < deadline:
+        now = session.pose()
+        if math.dist(before[:2], now[:2]) < REST_M:
+            return now[:2]
+        before = now
+    return before[:2]
 
 
 def _parked(redis, blocker: int, waited: float) -> bool:
