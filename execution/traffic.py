@@ -191,8 +191,19 @@ def plan(
 ) -> list[tuple]:
     """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t), in its
     turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan."""
+    asked = time.monotonic()
     with planning_turn(robot, progress):
-        return _plan(robot, start, goal, speed, around, progress)
+        began = time.monotonic()
+        path = _plan(robot, start, goal, speed, around, progress)
+    done = time.monotonic()
+    log.info(
+        "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
+        robot.name,
+        done - began,
+        began - asked,
+        path[-1][2] - path[0][2],
+    )
+    return path
 
 
 @contextlib.contextmanager
