@@ -187,14 +187,21 @@ def pad(t0: float):
 
 
 def plan(
-    robot: Robot, start, goal, speed: float, around: set[int] = frozenset(), progress=None
+    robot: Robot,
+    start,
+    goal,
+    speed: float,
+    around: set[int] = frozenset(),
+    progress=None,
+    settled: bool = False,
 ) -> list[tuple]:
     """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t), in its
-    turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan."""
+    turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan.
+    settled: the goal is the spot an earlier plan of this trip chose; it moves only if a robot would touch it."""
     asked = time.monotonic()
     with planning_turn(robot, progress):
         began = time.monotonic()
-        path = _plan(robot, start, goal, speed, around, progress)
+        path = _plan(robot, start, goal, speed, around, progress, settled)
     done = time.monotonic()
     log.info(
         "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
@@ -229,7 +236,7 @@ def planning_turn(robot: Robot, progress=None):
             redis.eval(coordination.RELEASE, 1, _key("turn"), token)
 
 
-def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress) -> list[tuple]:
+def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool) -> list[tuple]:
     """The plan itself: read the table, search, reserve. Without a map, or with no conflict-free plan within
     the search's bounds, the map route (or the straight line) is reserved as it is."""
     planner = route.planner_for(robot)
@@ -239,8 +246,8 @@ def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress) -
     if planner is not None:
         table, still = obstacles(coordination.connection(), robot.pk, now, around)  # a snapshot: no lock
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
-        still = [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
-        goal = free_goal(robot, goal, radius, still, planner, start)
+        exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
+        goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
             search = plain.SpaceTimeSearch(_passable(planner), radius, speed, pad(now))
             path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
@@ -484,9 +491,11 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     here = session.pose()[:2]
     claim(robot, here, here, session.check)  # under traffic from now on: others wait for it, not go round it
     try:
-        for _ in range(MAX_REPLANS):
+        spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
+        for replans in range(MAX_REPLANS):
             pose = session.pose()
-            path = plan(robot, pose[:2], goal, speed, around, progress=session.check)
+            path = plan(robot, pose[:2], spot, speed, around, session.check, settled=replans > 0)
+            spot = path[-1][:2]
             try:
                 _follow(session, path, limits, factor, nav, timed)
                 return _moved(tuple(goal), path[-1][:2])

@@ -335,7 +335,10 @@ class Clearance:
 
     def gap(self, c: Cell, t: float) -> float:
         """The least gap at the cell to the robots standing by time t (a wide gap when none is near)."""
-        return min((gap for since, gap in self.gaps(c) if since <= t + self.pad(t)), default=TRAFFIC_CELL * 2)
+        near = self.gaps(c)
+        if not near:  # most cells: nobody stands near
+            return TRAFFIC_CELL * 2
+        return min((gap for since, gap in near if since <= t + self.pad(t)), default=TRAFFIC_CELL * 2)
 
     def may_move(self, c: Cell, n: Cell, t: float, loose: bool = False) -> bool:
         """Whether a move from c to n keeps clear, or at least gets no nearer; loose (still within where the
@@ -356,6 +359,11 @@ class Clearance:
 
 SHORTCUT_REACH = 40  # points ahead a straight leg may join (string pulling costs grow with the square)
 MOVES = [(dc, dr, math.hypot(dc, dr)) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if dc or dr]
+STEPS = [*MOVES, (0, 0, 1.0)]
+DETOUR = (
+    1.5,
+    10,
+)  # the longest detour searched: this many times the shortest way, plus this many cells  # the moves and a wait of one tick where it stands
 
 
 @dataclass
@@ -435,18 +443,21 @@ class SpaceTimeSearch:
                 return self._timed(state, parent, times, start, goal, near_term, robot)
             if t - t0 > self.horizon_s:
                 continue
-            for dc, dr, d in [*MOVES, (0, 0, 1.0)]:
+            lo, own = t - self.pad(t), c in mine
+            here, ends = held(c, own), {}  # per move length: (t1, t1 + pad), worked out once
+            for dc, dr, d in STEPS:
                 n = (c[0] + dc, c[1] + dr)
                 if n not in distance:
                     continue
-                t1 = t + d * tick
-                lo, hi, own = t - self.pad(t), t1 + self.pad(t1), c in mine
-                if held(c, own).overlaps(lo, hi) or (n != c and held(n, own).overlaps(lo, hi)):
-                    continue
-                if not near.may_move(c, n, t1, loose=squeezed and c in mine):
-                    continue
+                if d not in ends:
+                    ends[d] = (t + d * tick, t + d * tick + self.pad(t + d * tick))
+                t1, hi = ends[d]
                 nxt = (n, round((t1 - t0) / tick))
-                if nxt in parent:
+                if nxt in parent:  # reached already, as early (the cheap test first)
+                    continue
+                if here.overlaps(lo, hi) or (n != c and held(n, own).overlaps(lo, hi)):
+                    continue
+                if not near.may_move(c, n, t1, loose=squeezed and own):
                     continue
                 parent[nxt], times[nxt] = state, t1
                 heapq.heappush(openq, (t1 - t0 + distance[n] * tick, next(counter), nxt, t1))
@@ -455,17 +466,23 @@ class SpaceTimeSearch:
     def _distances(self, goal: Cell, start: Cell) -> dict[Cell, float]:
         """Cells from which the goal is reachable on the static grid, with their distance to it (in cells).
         The goal's and the start's cells count as free: the caller knows that those points are (a cell's
-        centre may be too near a wall while the point in it is not)."""
+        centre may be too near a wall while the point in it is not). Cells farther from the goal than the start
+        is, by more than DETOUR (times, plus cells), are left out: the search makes no such detours."""
         dist = {goal: 0.0}
         heap = [(0.0, goal)]
+        limit = math.inf
         for pops in itertools.count():
             if not heap:
                 break
             if pops % 5000 == 4999:
                 self._progress()
             d, c = heapq.heappop(heap)
+            if d > limit:
+                return {cell: known for cell, known in dist.items() if known <= limit}
             if d > dist.get(c, math.inf):
                 continue
+            if c == start:
+                limit = d * DETOUR[0] + DETOUR[1]
             for dc, dr, step in MOVES:
                 n = (c[0] + dc, c[1] + dr)
                 nd = d + step
