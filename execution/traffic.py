@@ -76,6 +76,7 @@ NAV_PACE_GUESS = 0.5  # of a nav stack's top speed (at most 0.22 m/s): its pace 
 PACE_MIN_M = 0.3  # m: a nav stretch shorter than this says little of the stack's pace
 PACE_WEIGHT = 0.5  # of a new measure of a nav stack's pace against what was known
 EARLY_S = 1.0  # s a robot may set off on a stretch before the time its plan gives
+SLOW_PLAN_MPS = 0.35  # m per s of wall time a fast robot is planned at when its own pace finds no plan
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
 
@@ -237,8 +238,10 @@ def planning_turn(robot: Robot, progress=None):
 
 
 def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool) -> list[tuple]:
-    """The plan itself: read the table, search, reserve. Without a map, or with no conflict-free plan within
-    the search's bounds, the map route (or the straight line) is reserved as it is."""
+    """The plan itself: read the table, search, reserve. A fast robot whose search runs out of steps is
+    searched again at SLOW_PLAN_MPS (a grid search pays for each wait in ticks of one cell's travel: the faster
+    the robot, the more of them); it then keeps to the slower plan's times. Without a map, or with no
+    conflict-free plan within the search's bounds, the map route (or the straight line) is reserved as it is."""
     planner = route.planner_for(robot)
     radius = reach(robot)
     now = time.time()
@@ -249,8 +252,11 @@ def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress, s
         exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
         goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            search = plain.SpaceTimeSearch(_passable(planner), radius, speed, pad(now))
-            path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
+            for pace in (speed, SLOW_PLAN_MPS) if speed > SLOW_PLAN_MPS * 1.2 else (speed,):
+                search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now))
+                path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
+                if path is not None:
+                    break
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
