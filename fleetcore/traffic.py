@@ -234,10 +234,6 @@ class ReservationTable:
             }
         )
 
-    def free_after(self, cells: Iterable[Cell], t: float, robot: str = "") -> bool:
-        """Whether nobody else holds these cells at any time from t on (a robot may park there)."""
-        return self.holder(cells, t, FOREVER, robot) is None
-
     def reserve_path(
         self, robot: str, path: Sequence[tuple[float, float, float]], radius: float, pad
     ) -> None:
@@ -279,10 +275,6 @@ class Busy:
 
     def __init__(self, held: dict[Cell, list[tuple[float, float]]]) -> None:
         self.cells = {c: Spans(intervals) for c, intervals in held.items()}
-
-    def taken(self, cells: Iterable[Cell], lo: float, hi: float) -> bool:
-        """Whether any of these cells is held at a time overlapping (lo, hi)."""
-        return any(c in self.cells and self.cells[c].overlaps(lo, hi) for c in cells)
 
     def union(self, cells: Iterable[Cell]) -> Spans:
         """When any of these cells is held (a footprint's: one look-up for it, then, instead of one per cell)."""

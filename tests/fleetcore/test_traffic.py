@@ -146,8 +146,8 @@ def test_busy_intervals_agree_with_the_table():
     busy = table.intervals("me")
     for lo, hi in [(0.0, 1.0), (0.0, 1.1), (2.5, 2.9), (3.0, 5.0), (3.1, 4.9), (5.5, 9.0), (6.0, 7.0)]:
         expected = table.holder([(0, 0)], lo, hi, "me") is not None
-        assert busy.taken([(0, 0)], lo, hi) is expected, (lo, hi)
-    assert not busy.taken([(1, 1)], 0.0, 9.0)  # its own reservations never hold it up
+        assert busy.union([(0, 0)]).overlaps(lo, hi) is expected, (lo, hi)
+    assert not busy.union([(1, 1)]).overlaps(0.0, 9.0)  # its own reservations never hold it up
     table.reserve("d", [(2, 2)], 2.5, 4.0)
     either = table.intervals("me").union([(0, 0), (2, 2), (1, 1)])
     assert (either.starts, either.ends) == ([1.0, 5.0], [4.0, 6.0])  # one footprint: one look-up
