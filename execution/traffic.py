@@ -55,6 +55,7 @@ CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses 
 RENEW_BEFORE_S = 20.0  # a waiting robot renews its claim once less than this is left of it
 CLAIM_LIMIT_S = 10.0  # s of claims lost to others' writes (WATCH) before a claim gives up
 HOLD_S = 4.0  # s the cells another robot holds now are reserved for, in a newcomer's plan
+UNPLANNED_HOLD_S = 20.0  # s the same for a robot about to set off that has not planned yet (its turn comes)
 WAIT_LIMIT_S = 120.0  # s a robot waits for cells before its step fails
 REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before going around it
 BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
@@ -68,6 +69,7 @@ REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned (it
 REST_M = 0.002  # m between two odometry poses of a robot at rest
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
+TELL_WAIT_S = 10.0  # s between a waiting robot's log lines (whom it waits for, and what that one does)
 NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and its deadlock checks)
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
@@ -166,12 +168,15 @@ def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
         held = _capsule(pk, entry)
         if pk in around:
             still.append((held, -math.inf))
-        else:
-            table.reserve(str(pk), plain.swept_cells(held.a, held.b, held.r), now - 1.0, now + HOLD_S)
+        else:  # one without a plan yet waits for its turn to plan, which will heed this one: it stays till then
+            until = now + (HOLD_S if pk in plans else UNPLANNED_HOLD_S)
+            table.reserve(str(pk), plain.swept_cells(held.a, held.b, held.r), now - 1.0, until)
     busy = busy_ids()
     for disc, since in standing(redis, {robot_id, *claims, *plans}):
         if int(disc.label) in busy:  # about to set off: in the way for now, not for good
-            table.reserve(disc.label, plain.footprint_cells(disc.a, disc.r), now - 1.0, now + HOLD_S)
+            table.reserve(
+                disc.label, plain.footprint_cells(disc.a, disc.r), now - 1.0, now + UNPLANNED_HOLD_S
+            )
         else:
             still.append((disc, since))
     return table, still
@@ -238,10 +243,9 @@ def planning_turn(robot: Robot, progress=None):
 
 
 def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool) -> list[tuple]:
-    """The plan itself: read the table, search, reserve. A fast robot whose search runs out of steps is
-    searched again at SLOW_PLAN_MPS (a grid search pays for each wait in ticks of one cell's travel: the faster
-    the robot, the more of them); it then keeps to the slower plan's times. Without a map, or with no
-    conflict-free plan within the search's bounds, the map route (or the straight line) is reserved as it is."""
+    """The plan itself: read the table, search (searches(): less demanding each time one finds nothing),
+    reserve. Without a map, or with no plan within the searches' bounds, the map route (or the straight line)
+    is reserved as it is."""
     planner = route.planner_for(robot)
     radius = reach(robot)
     now = time.time()
@@ -252,10 +256,14 @@ def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress, s
         exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
         goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            for pace in (speed, SLOW_PLAN_MPS) if speed > SLOW_PLAN_MPS * 1.2 else (speed,):
-                search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now))
+            for pace, window in searches(speed):
+                search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now), window_s=window)
                 path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
                 if path is not None:
+                    if window < plain.WINDOW_S:
+                        log.info(
+                            "traffic: %s heeds only the room held now on its way to %s", robot.name, goal
+                        )
                     break
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
@@ -263,6 +271,17 @@ def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress, s
         path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
     _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
     return path
+
+
+def searches(speed: float) -> list[tuple[float, float]]:
+    """(pace, window) of the searches tried in turn until one finds a plan: the robot's pace; a fast robot's
+    again at SLOW_PLAN_MPS (a grid search pays for each wait in ticks of one cell's travel: the faster the
+    robot, the more of them); then heeding only the room others hold now and the robots standing (a way round
+    robots parked in the way, which the claims keep apart from the others, replanned as it goes)."""
+    out = [(speed, plain.WINDOW_S)]
+    if speed > SLOW_PLAN_MPS * 1.2:
+        out.append((SLOW_PLAN_MPS, plain.WINDOW_S))
+    return [*out, (speed, 0.0)]
 
 
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
@@ -394,7 +413,7 @@ def wait_for(session: Session, start, end) -> None:
     every NOTE_WAIT_S it reads the robots standing afresh, notes whom it waits for, keeps its claim alive and
     looks for a cycle of waits."""
     robot, redis = session.robot, coordination.connection()
-    started = same_since = noted = time.monotonic()
+    started = same_since = noted = told = time.monotonic()
     last, name, everyone = None, "", None
     while (blocker := claim(robot, start, end, session.check, everyone)) is not None:
         now = time.monotonic()
@@ -415,6 +434,15 @@ def wait_for(session: Session, start, end) -> None:
             if now - same_since > REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
                 log.info("traffic: %s goes round %s, which stands in its way", robot.name, name)
                 raise Reroute({blocker})
+        if now - told >= TELL_WAIT_S:
+            told = now
+            log.info(
+                "traffic: %s has waited %.0f s for %s (%s)",
+                robot.name,
+                now - started,
+                name,
+                _doing(redis, blocker),
+            )
         if now - started > WAIT_LIMIT_S:
             raise StepFailed(f"{robot.name}: waited {WAIT_LIMIT_S:.0f} s for {name} to make way")
         session.check()
@@ -422,6 +450,16 @@ def wait_for(session: Session, start, end) -> None:
         session.pose()  # a robot waiting still reads where it is (and odometry that stops fails the step)
     if last is not None:
         live.path(robot, None, None)
+
+
+def _doing(redis, robot_id: int) -> str:
+    """What a robot in the way is doing, as the traffic tables say (for the log of a long wait)."""
+    waits = _hash(redis, "waits")
+    if robot_id in waits:
+        return f"it waits for #{waits[robot_id].get('for')}"
+    if robot_id in _hash(redis, "claims"):
+        return "it holds room under way"
+    return "it stands, not under traffic"
 
 
 def _at_rest(session: Session) -> tuple[float, float]:

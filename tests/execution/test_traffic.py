@@ -2,6 +2,7 @@
 
 import itertools
 import math
+import time
 
 import pytest
 from django.core.cache import cache
@@ -112,3 +113,47 @@ def test_stretches_are_short_and_keep_the_planned_waits():
         math.dist(p[:2], q[:2]) <= traffic.LEG_M + 1e-9 for p, q in zip([path[0], *legs], legs, strict=False)
     )
     assert [leg[3] for leg in legs].count(True) == 1 and legs[-1][:2] == (3.0, 1.0)
+
+
+def _slots_on(path, radius: float, cells: set, t0: float, t1: float) -> list:
+    """The slots of a timed path that touch these cells within [t0, t1] (no padding)."""
+    return [
+        (p, q)
+        for p, q in itertools.pairwise(path)
+        for slot, a, b in plain.leg_slots(p, q, radius, lambda t: 0.0)
+        if slot & cells and a < t1 and t0 < b
+    ]
+
+
+def test_a_robot_that_has_not_planned_yet_is_passed_as_standing_until_its_turn(robots):
+    a, b = robots["a"], robots["b"]
+    # b stands on a's line, under traffic, with no plan yet (it waits for its turn to plan)
+    assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0)) is None
+    path = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
+    held = plain.footprint_cells((0.0, -2.0), traffic.reach(b))
+    now = path[0][2]
+    assert path[-1][:2] == (4.0, -2.0)
+    assert not _slots_on(path, traffic.reach(a), held, now, now + traffic.UNPLANNED_HOLD_S)
+    assert now + traffic.UNPLANNED_HOLD_S > now + traffic.HOLD_S + 10  # longer than a planned robot's hold
+
+
+def test_when_the_reservations_leave_no_plan_the_robot_still_goes_round_the_robots_standing(robots):
+    a, b, c = robots["a"], robots["b"], robots["c"]
+    redis, now = traffic.coordination.connection(), time.time()
+    goal_cells = plain.footprint_cells((4.0, -2.0), traffic.reach(a) + 0.2)
+    entry = {  # c's plan holds a's goal from a second on, for longer than any search looks ahead
+        "cells": [[col, row, now + 1.0, now + 1000.0] for col, row in goal_cells],
+        "goal": [4.0, 4.0],
+        "r": traffic.reach(c),
+        "at": now + 1000.0,
+        "expires": now + 2000.0,
+    }
+    traffic._put(redis, "plans", c.pk, entry)
+    path = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
+    assert path[-1][:2] == (4.0, -2.0)
+    closest = min(
+        plain.segment_distance((0.0, -2.0), (0.0, -2.0), p[:2], q[:2]) for p, q in itertools.pairwise(path)
+    )
+    # round b, parked on the straight line (the map route, which the planner drove when no search found a plan)
+    assert closest > traffic.reach(a) + traffic.reach(b)
+    assert traffic.searches(0.5)[-1] == (0.5, 0.0)  # it was the last search: only the room held now heeded
