@@ -17,7 +17,8 @@ The algorithms are plain (fleetcore.traffic); this module keeps their state in R
    A claim is checked and written in one Redis transaction (WATCH on the claims: optimistic, no lock to wait
    for or to lapse), so two robots claiming at the same moment never both get the same room.
 3. Deadlock. Waiting robots note whom they wait for; a cycle of waits (fleetcore.traffic.wait_cycle) is broken
-   by its robot with the highest id, which drops its claim ahead and replans around the robots of the cycle.
+   by one of its robots (the one that gave way least often, then the highest id), which drops its claim ahead
+   and replans around the robots of the cycle.
    A robot waiting on one that is parked (not under traffic) goes around it after REROUTE_AFTER_S.
 
 Robots with their own navigation stack take the same route as goals, one stretch at a time, each claimed
@@ -50,7 +51,7 @@ LEG_M = 1.2  # m: the longest stretch claimed at once
 RESERVE_MARGIN = 0.05  # m added to a robot's reach radius in reservations and claims
 CLAIM_MARGIN = 0.05  # m more kept between two robots' room when claiming (2 x 0.05 + 0.05 < spots' margin)
 APPROACH_SLACK = 0.03  # m a robot already too close may come nearer (a route planned on cells wobbles)
-PLAN_MARGIN = 0.1  # m more again when planning round robots that stand (robots stop up to 0.2 m off a point)
+PLAN_MARGIN = 0.25  # m more again when planning round robots that stand (robots cut corners by up to 0.2 m)
 CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses after this
 RENEW_BEFORE_S = 20.0  # a waiting robot renews its claim once less than this is left of it
 CLAIM_LIMIT_S = 10.0  # s of claims lost to others' writes (WATCH) before a claim gives up
@@ -71,7 +72,9 @@ REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
 TELL_WAIT_S = 10.0  # s between a waiting robot's log lines (whom it waits for, and what that one does)
 NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and its deadlock checks)
-WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does
+WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does...
+CORNER_TOLERANCE = 0.05  # m: ... unless it is close to a wall (_tolerance)
+CORNER_TURN = 0.35  # rad: a turn of the route sharper than this is a corner
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
 NAV_PACE_GUESS = 0.5  # of a nav stack's top speed (at most 0.22 m/s): its pace until one is measured
@@ -390,7 +393,7 @@ def release(robot: Robot, pose) -> None:
     """The step has ended: drop the robot's reservation, claim and wait; remember where it parked."""
     redis = coordination.connection()
     with redis.pipeline() as pipe:
-        for name in ("plans", "claims", "waits"):
+        for name in ("plans", "claims", "waits", "breaks"):
             pipe.hdel(_key(name), str(robot.pk))
         if pose is not None:
             pipe.hset(_key("parked"), str(robot.pk), json.dumps({"x": pose[0], "y": pose[1]}))
@@ -494,12 +497,19 @@ def _renew(redis, robot_id: int) -> None:
 
 
 def _check_deadlock(redis, robot_id: int) -> None:
-    """If this robot is in a cycle of waits and has the highest id in it, it gives way: Reroute."""
+    """If this robot is in a cycle of waits and is the one to give way, it does: Reroute. The one to give way
+    has given way least often on its trip, ties to the highest id: a robot whose reroutes did not get it out
+    of the others' way is not asked again and again while they wait."""
     waits = {str(pk): str(entry["for"]) for pk, entry in _hash(redis, "waits").items()}
     cycle = plain.wait_cycle(waits, str(robot_id))
-    if cycle and max(map(int, cycle)) == robot_id:
+    if not cycle:
+        return
+    given = dict(zip(cycle, redis.hmget(_key("breaks"), cycle), strict=True))
+    if min(cycle, key=lambda pk: (int(given[pk] or 0), -int(pk))) == str(robot_id):
         redis.incr(_key("deadlocks"))
-        log.info("traffic: deadlock among robots %s broken by %s", cycle, robot_id)
+        redis.hincrby(_key("breaks"), str(robot_id), 1)
+        held = {pk: (e["a"], e["b"]) for pk, e in _hash(redis, "claims").items() if str(pk) in cycle}
+        log.info("traffic: deadlock among robots %s broken by %s (room held: %s)", cycle, robot_id, held)
         raise Reroute({int(pk) for pk in cycle} - {robot_id})
 
 
@@ -585,6 +595,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
+    planner = route.planner_for(robot)
     windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
@@ -618,7 +629,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
                 continue
             _note_pace(session, distance, time.monotonic() - sent)
         else:
-            tolerance = motion.TOLERANCE if last else WAYPOINT_TOLERANCE
+            tolerance = motion.TOLERANCE if last else _tolerance(planner, pose[:2], legs, i)
             controller = motion.GoToGoal(target, limits, factor, tolerance)
             drive(
                 session,
@@ -627,6 +638,20 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
                 stall_s=STALL_S,
                 goal=target,
             )
+
+
+def _tolerance(planner, here, legs, i: int) -> float:
+    """How near the robot must come to the end of leg i before it heads for the next: WAYPOINT_TOLERANCE, or
+    CORNER_TOLERANCE where the route turns close to a wall (a plan hugs the walls it passes, as near as the
+    robot's size allows: a corner cut by 0.2 m there grazes the shelf; robots stalled against shelf corners)."""
+    point, after = legs[i][:2], legs[i + 1][:2]
+    before = legs[i - 1][:2] if i else here
+    heading_in = math.atan2(point[1] - before[1], point[0] - before[0])
+    heading_out = math.atan2(after[1] - point[1], after[0] - point[0])
+    turn = abs(math.remainder(heading_out - heading_in, math.tau))
+    if turn > CORNER_TURN and (planner is None or planner.near_walls(*point)):
+        return CORNER_TOLERANCE
+    return WAYPOINT_TOLERANCE
 
 
 def known_pace(robot_id: int) -> float | None:

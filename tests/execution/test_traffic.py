@@ -58,7 +58,7 @@ def test_a_plan_goes_around_the_path_reserved_before_it(robots):
     )  # it waited or went round: not faster than straight
 
 
-def test_a_wait_for_cycle_is_broken_by_the_robot_with_the_highest_id(robots):
+def test_a_wait_for_cycle_is_broken_by_the_robot_that_gave_way_least_then_the_highest_id(robots):
     a, b = robots["a"], robots["b"]
     redis = traffic.coordination.connection()
     before = traffic.deadlocks()
@@ -71,6 +71,12 @@ def test_a_wait_for_cycle_is_broken_by_the_robot_with_the_highest_id(robots):
         traffic._check_deadlock(redis, high.pk)
     assert caught.value.around == {low.pk}
     assert traffic.deadlocks() == before + 1
+    # the same two wait for each other again (the reroute did not get high out of low's way): low gives way
+    traffic._check_deadlock(redis, high.pk)
+    with pytest.raises(traffic.Reroute) as caught:
+        traffic._check_deadlock(redis, low.pk)
+    assert caught.value.around == {high.pk}
+    assert traffic.deadlocks() == before + 2
 
 
 def test_the_map_is_told_the_route_and_whom_a_robot_waits_for(robots, monkeypatch):
@@ -157,3 +163,20 @@ def test_when_the_reservations_leave_no_plan_the_robot_still_goes_round_the_robo
     # round b, parked on the straight line (the map route, which the planner drove when no search found a plan)
     assert closest > traffic.reach(a) + traffic.reach(b)
     assert traffic.searches(0.5)[-1] == (0.5, 0.0)  # it was the last search: only the room held now heeded
+
+
+def test_a_corner_close_to_a_shelf_is_driven_to_closely_and_one_in_the_open_loosely():
+    from fleetcore.planning import Planner
+    from fleetcore.world import load_world
+
+    planner = Planner(load_world("warehouse").map, 0.15)  # a TurtleBot's size; a shelf at x 7.5-8.5, y 6.5-11
+    round_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 11.2, 1.0, False), (6.0, 11.6, 2.0, False)]
+    along_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 10.0, 1.0, False), (8.8, 11.0, 2.0, False)]
+    in_the_open = [(14.0, 2.0, 0.0, False), (14.0, 4.0, 1.0, False), (16.0, 4.0, 2.0, False)]
+    assert traffic._tolerance(planner, (8.8, 8.0), round_the_shelf, 1) == traffic.CORNER_TOLERANCE
+    assert traffic._tolerance(planner, (8.8, 8.0), along_the_shelf, 1) == traffic.WAYPOINT_TOLERANCE
+    assert traffic._tolerance(planner, (14.0, 1.0), in_the_open, 1) == traffic.WAYPOINT_TOLERANCE
+    assert (
+        traffic._tolerance(None, (14.0, 1.0), in_the_open, 1) == traffic.CORNER_TOLERANCE
+    )  # no map: careful
+    assert planner.near_walls(8.8, 11.2) and not planner.near_walls(14.0, 4.0)
