@@ -3,7 +3,7 @@
 `python -m bench.coordination [--quick|--full] [--counts N ...] [--workers K]` writes
 bench/results/coordination.json:
 {"coordination": {"<n>": {"contacts", "deadlocks", "completion", "makespan_s", "lone_s", "makespan_ratio",
- "failed", "finish_s" (seconds to each robot's end, simulated time)},
+ "failed", "finish_s" (seconds to each robot's end, simulated time), "touched" ([t, robot, robot] each contact)},
  "allocation_ms_1000": {"p50", "p99"}, "executors": {"workers", "threads", "database"}}, ...}.
 
 For n = 2, 4, 8, 16, 32 robots (quick: 2, 4, 8) of mixed models (Huskies, TurtleBots, TIAGos with move_base;
@@ -247,6 +247,7 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
         "makespan_s": round(makespan, 1),
         "failed": {name: row.outcome[-200:] for name, row in rows.items() if row.status != "succeeded"},
         "finish_s": {name: round((at - started) * time_scale, 1) for name, at in sorted(finished.items())},
+        "touched": [list(contact) for contact in sim.touched(contacts0)],
     }
 
 

@@ -28,6 +28,7 @@ first: their goals never conflict with the reservations (execution.steps.navigat
 from __future__ import annotations
 
 import contextlib
+import functools
 import itertools
 import json
 import logging
@@ -51,7 +52,7 @@ LEG_M = 1.2  # m: the longest stretch claimed at once
 RESERVE_MARGIN = 0.05  # m added to a robot's reach radius in reservations and claims
 CLAIM_MARGIN = 0.05  # m more kept between two robots' room when claiming (2 x 0.05 + 0.05 < spots' margin)
 APPROACH_SLACK = 0.03  # m a robot already too close may come nearer (a route planned on cells wobbles)
-PLAN_MARGIN = 0.25  # m more again when planning round robots that stand (robots cut corners by up to 0.2 m)
+PLAN_MARGIN = 0.1  # m more again when planning round robots that stand (robots stop up to 0.2 m off a point)
 CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses after this
 RENEW_BEFORE_S = 20.0  # a waiting robot renews its claim once less than this is left of it
 CLAIM_LIMIT_S = 10.0  # s of claims lost to others' writes (WATCH) before a claim gives up
@@ -62,9 +63,11 @@ REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before goin
 BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
 BUSY = ("running", "queued")
 MAX_REROUTES = 4
+BACK_OFF_M = 0.4  # m a robot breaking a deadlock drives away from the others first (_back_off)
 TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together are planned one by one)
 TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
-TURN_POLL_S = 0.02
+TURN_POLL_S = 0.05
+PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
 MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
 REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned (its window runs out)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
@@ -73,7 +76,7 @@ WAIT_POLL_S = 0.2  # s between a waiting robot's tries
 TELL_WAIT_S = 10.0  # s between a waiting robot's log lines (whom it waits for, and what that one does)
 NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and its deadlock checks)
 WAYPOINT_TOLERANCE = 0.2  # m: a corner of the route needs no precision, only the goal does...
-CORNER_TOLERANCE = 0.05  # m: ... unless it is close to a wall (_tolerance)
+CORNER_TOLERANCE = 0.05  # m: ... but a corner (a turn sharper than CORNER_TURN) does (_tolerance)
 CORNER_TURN = 0.35  # rad: a turn of the route sharper than this is a corner
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
@@ -208,6 +211,7 @@ def plan(
     turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan.
     settled: the goal is the spot an earlier plan of this trip chose; it moves only if a robot would touch it."""
     asked = time.monotonic()
+    progress = _now_and_then(progress)
     with planning_turn(robot, progress):
         began = time.monotonic()
         path = _plan(robot, start, goal, speed, around, progress, settled)
@@ -220,6 +224,23 @@ def plan(
         path[-1][2] - path[0][2],
     )
     return path
+
+
+def _now_and_then(progress):
+    """progress (the step's check: a Redis read of its stop flag) called at most every PROGRESS_EVERY_S: a
+    search calls it every few hundred steps, a robot waiting for its turn every poll; 32 robots doing so
+    spent a seventh of their planning time on it and kept Redis busy."""
+    if progress is None:
+        return None
+    last = -math.inf
+
+    def call() -> None:
+        nonlocal last
+        if time.monotonic() - last >= PROGRESS_EVERY_S:
+            last = time.monotonic()
+            progress()
+
+    return call
 
 
 @contextlib.contextmanager
@@ -309,9 +330,22 @@ def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple
     return spot
 
 
+@functools.lru_cache(maxsize=16)
 def _passable(planner):
+    """Whether the robot may stand anywhere in a traffic cell: the planner's map is free at each of its
+    corners (a cell free at its centre only lets a path between two such cells, or a straightened leg
+    through them, clip a shelf's corner by up to 0.14 m, where the map keeps 0.05 m: TurtleBots stalled so).
+    One per planner (robot size and map version), its answers kept."""
+    known: dict = {}
+    half = plain.TRAFFIC_CELL / 2 - 1e-6
+
     def passable(cell) -> bool:
-        return planner.free(*planner.to_cell(*plain.center_of(cell)))
+        if cell not in known:
+            x, y = plain.center_of(cell)
+            known[cell] = all(
+                planner.free(*planner.to_cell(x + dx, y + dy)) for dx in (-half, half) for dy in (-half, half)
+            )
+        return known[cell]
 
     return passable
 
@@ -560,11 +594,56 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
                 if reroutes > MAX_REROUTES:
                     raise StepFailed(f"{robot.name}: no way through after {MAX_REROUTES} reroutes") from None
                 around |= exc.around
+                _back_off(session, exc.around, limits, factor, nav)
                 here = session.pose()[:2]
                 claim(robot, here, here, session.check)  # keep only where it stands: the others may go on
         raise StepFailed(f"{robot.name}: not there after {MAX_REPLANS} plans")
     finally:
         release(robot, session.link.poses.value)
+
+
+def _back_off(session: Session, others: set[int], limits: motion.Limits, factor: float, nav: bool) -> None:
+    """Give way to the robots of a deadlock: drive BACK_OFF_M straight away from them (or half or a quarter
+    turn aside), where the map is free and the claim is granted, so the plan round them starts with room to
+    pass; two robots stopped nose to nose are too close for any first stretch of a way round to be granted
+    (the claims let nobody come nearer). Nowhere to go: it replans where it stands."""
+    robot, redis = session.robot, coordination.connection()
+    here = session.pose()[:2]
+    held = [_capsule(pk, entry) for pk, entry in _hash(redis, "claims").items() if pk in others]
+    for target in give_way(here, held, route.planner_for(robot)):
+        if claim(robot, here, target, session.check) is not None:
+            continue
+        log.info("traffic: %s backs off to %s to give way to %s", robot.name, target, sorted(others))
+        try:
+            if nav:
+                navigate(session, *target, travel_time(BACK_OFF_M * 2, math.pi, limits, factor))
+            else:
+                controller = motion.GoToGoal(target, limits, factor, CORNER_TOLERANCE)
+                drive(session, controller, travel_time(BACK_OFF_M, math.pi, limits, factor), stall_s=STALL_S)
+        except StepFailed as exc:  # it got part of the way, or none: the plan starts from where it is
+            log.info("traffic: %s backed off only so far (%s)", robot.name, exc)
+        return
+
+
+def give_way(here, held: list[plain.Capsule], planner) -> list[tuple[float, float]]:
+    """Where a robot at `here` may back off to from the room others hold: BACK_OFF_M straight away from them,
+    else half or a quarter turn aside, on free ground (the planner's map, when there is one)."""
+    away = [0.0, 0.0]
+    for other in held:
+        point = plain.nearest_on(here, other.a, other.b)
+        d = math.dist(here, point) or 1e-9
+        away[0], away[1] = away[0] + (here[0] - point[0]) / d, away[1] + (here[1] - point[1]) / d
+    if away == [0.0, 0.0]:
+        return []
+    heading, out = math.atan2(away[1], away[0]), []
+    for turn in (0.0, math.pi / 4, -math.pi / 4, math.pi / 2, -math.pi / 2):
+        target = (
+            here[0] + BACK_OFF_M * math.cos(heading + turn),
+            here[1] + BACK_OFF_M * math.sin(heading + turn),
+        )
+        if planner is None or planner.free(*planner.to_cell(*target)):
+            out.append(target)
+    return out
 
 
 def _measure_clock(session: Session) -> None:
@@ -595,7 +674,6 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
-    planner = route.planner_for(robot)
     windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
@@ -629,7 +707,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
                 continue
             _note_pace(session, distance, time.monotonic() - sent)
         else:
-            tolerance = motion.TOLERANCE if last else _tolerance(planner, pose[:2], legs, i)
+            tolerance = motion.TOLERANCE if last else _tolerance(pose[:2], legs, i)
             controller = motion.GoToGoal(target, limits, factor, tolerance)
             drive(
                 session,
@@ -640,18 +718,17 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
             )
 
 
-def _tolerance(planner, here, legs, i: int) -> float:
-    """How near the robot must come to the end of leg i before it heads for the next: WAYPOINT_TOLERANCE, or
-    CORNER_TOLERANCE where the route turns close to a wall (a plan hugs the walls it passes, as near as the
-    robot's size allows: a corner cut by 0.2 m there grazes the shelf; robots stalled against shelf corners)."""
+def _tolerance(here, legs, i: int) -> float:
+    """How near the robot must come to the end of leg i before it heads for the next: WAYPOINT_TOLERANCE where
+    the route goes on straight, CORNER_TOLERANCE where it turns. A plan's corners are where it goes round
+    something (a shelf, a robot standing) as near as the robot's size allows: a corner cut by 0.2 m grazes it
+    (TurtleBots stalled against shelf corners so)."""
     point, after = legs[i][:2], legs[i + 1][:2]
     before = legs[i - 1][:2] if i else here
     heading_in = math.atan2(point[1] - before[1], point[0] - before[0])
     heading_out = math.atan2(after[1] - point[1], after[0] - point[0])
     turn = abs(math.remainder(heading_out - heading_in, math.tau))
-    if turn > CORNER_TURN and (planner is None or planner.near_walls(*point)):
-        return CORNER_TOLERANCE
-    return WAYPOINT_TOLERANCE
+    return CORNER_TOLERANCE if turn > CORNER_TURN else WAYPOINT_TOLERANCE
 
 
 def known_pace(robot_id: int) -> float | None:

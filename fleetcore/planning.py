@@ -40,11 +40,6 @@ class Planner:
         ox, oy, _ = self.grid.origin
         return ox + (c + 0.5) * self.cell, oy + (r + 0.5) * self.cell
 
-    def near_walls(self, x: float, y: float) -> bool:
-        """Whether a robot of this planner's size standing at (x, y) is within 0.35 m of a wall or shelf."""
-        c, r = self.to_cell(x, y)
-        return not (0 <= c < self.w and 0 <= r < self.h) or bool(self.near[r, c])
-
     def free(self, c: int, r: int, blocked: frozenset = frozenset()) -> bool:
         return 0 <= c < self.w and 0 <= r < self.h and not self.lethal[r, c] and (c, r) not in blocked
 

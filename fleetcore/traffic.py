@@ -100,11 +100,18 @@ def segment_distance(p: Point, q: Point, a: Point, b: Point) -> float:
     )
 
 
-def _point_segment(p: Point, a: Point, b: Point) -> float:
+def nearest_on(p: Point, a: Point, b: Point) -> Point:
+    """The point of the segment a-b nearest to p."""
     dx, dy = b[0] - a[0], b[1] - a[1]
     length2 = dx * dx + dy * dy
-    f = 0.0 if length2 == 0 else max(0.0, min(1.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2))
-    return math.dist(p, (a[0] + f * dx, a[1] + f * dy))
+    if length2 == 0.0:
+        return a
+    f = max(0.0, min(1.0, ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / length2))
+    return (a[0] + f * dx, a[1] + f * dy)
+
+
+def _point_segment(p: Point, a: Point, b: Point) -> float:
+    return math.dist(p, nearest_on(p, a, b))
 
 
 def _cross(p: Point, q: Point, a: Point, b: Point) -> bool:

@@ -48,6 +48,11 @@ def contact_count(fleet: SimFleet) -> int:
     return len(fleet.physics.contacts)
 
 
+def touched(fleet: SimFleet, since: int = 0) -> list[tuple[float, str, str]]:
+    """The contacts counted so far from the since-th on: (simulated time, robot, robot)."""
+    return [(round(c.t, 1), c.a, c.b) for c in fleet.physics.contacts[since:]]
+
+
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that nothing listens on right now."""
     with socket.socket() as s:
@@ -130,7 +135,7 @@ def running_world(
 
 
 # What the world process answers: request name -> fn(fleet, *args), run on the fleet's loop.
-REQUESTS = {"pose": SimFleet.pose, "contacts": contact_count, "home": send_home}
+REQUESTS = {"pose": SimFleet.pose, "contacts": contact_count, "touched": touched, "home": send_home}
 
 
 class WorldProcess:
@@ -179,6 +184,10 @@ class WorldProcess:
     def contacts(self) -> int:
         """Robot-robot contacts the physics has counted since the world started."""
         return self._request("contacts")
+
+    def touched(self, since: int = 0) -> list[tuple[float, str, str]]:
+        """Which robots touched, and when (simulated s): the contacts from the since-th on."""
+        return self._request("touched", since)
 
     def home(self, names: Iterable[str]) -> None:
         """Teleport these robots back to their start poses (send_home)."""

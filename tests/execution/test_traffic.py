@@ -9,6 +9,7 @@ from django.core.cache import cache
 
 import live
 from execution import traffic
+from fleetcore import motion
 from fleetcore import traffic as plain
 from places.worlds import load_world_into_db
 from robots.models import Robot
@@ -165,18 +166,30 @@ def test_when_the_reservations_leave_no_plan_the_robot_still_goes_round_the_robo
     assert traffic.searches(0.5)[-1] == (0.5, 0.0)  # it was the last search: only the room held now heeded
 
 
-def test_a_corner_close_to_a_shelf_is_driven_to_closely_and_one_in_the_open_loosely():
+def test_a_corner_is_driven_to_closely_and_a_point_on_a_straight_way_loosely():
+    round_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 11.2, 1.0, False), (6.0, 11.6, 2.0, False)]
+    along_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 10.0, 1.0, False), (8.8, 11.0, 2.0, False)]
+    slight_bend = [(14.0, 2.0, 0.0, False), (14.0, 4.0, 1.0, False), (14.5, 6.0, 2.0, False)]
+    assert traffic._tolerance((8.8, 8.0), round_the_shelf, 1) == traffic.CORNER_TOLERANCE
+    assert traffic._tolerance((8.8, 8.0), along_the_shelf, 1) == traffic.WAYPOINT_TOLERANCE
+    assert traffic._tolerance((14.0, 1.0), slight_bend, 1) == traffic.WAYPOINT_TOLERANCE  # 14 degrees
+    assert traffic._tolerance((8.8, 8.0), round_the_shelf, 0) == traffic.WAYPOINT_TOLERANCE  # from the pose
+    assert traffic.CORNER_TOLERANCE <= motion.TOLERANCE / 2
+
+
+def test_a_robot_giving_way_backs_straight_off_else_aside_and_never_into_a_shelf():
     from fleetcore.planning import Planner
     from fleetcore.world import load_world
 
-    planner = Planner(load_world("warehouse").map, 0.15)  # a TurtleBot's size; a shelf at x 7.5-8.5, y 6.5-11
-    round_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 11.2, 1.0, False), (6.0, 11.6, 2.0, False)]
-    along_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 10.0, 1.0, False), (8.8, 11.0, 2.0, False)]
-    in_the_open = [(14.0, 2.0, 0.0, False), (14.0, 4.0, 1.0, False), (16.0, 4.0, 2.0, False)]
-    assert traffic._tolerance(planner, (8.8, 8.0), round_the_shelf, 1) == traffic.CORNER_TOLERANCE
-    assert traffic._tolerance(planner, (8.8, 8.0), along_the_shelf, 1) == traffic.WAYPOINT_TOLERANCE
-    assert traffic._tolerance(planner, (14.0, 1.0), in_the_open, 1) == traffic.WAYPOINT_TOLERANCE
-    assert (
-        traffic._tolerance(None, (14.0, 1.0), in_the_open, 1) == traffic.CORNER_TOLERANCE
-    )  # no map: careful
-    assert planner.near_walls(8.8, 11.2) and not planner.near_walls(14.0, 4.0)
+    planner = Planner(load_world("warehouse").map, 0.15)
+    nose_to_nose = [plain.Capsule((14.45, 3.0), (14.45, 3.0), 0.2, "other")]
+    first = traffic.give_way((14.0, 3.0), nose_to_nose, planner)[0]
+    assert first == pytest.approx((14.0 - traffic.BACK_OFF_M, 3.0))  # straight away from the other
+    # against a shelf's east face (x 8.5): straight away is into it; it goes aside, never nearer the other
+    by_the_shelf = [plain.Capsule((9.2, 9.0), (9.2, 9.0), 0.2, "other")]
+    targets = traffic.give_way((8.8, 9.0), by_the_shelf, planner)
+    assert targets and all(planner.free(*planner.to_cell(*t)) for t in targets)
+    assert all(math.dist(t, (9.2, 9.0)) > 0.4 for t in targets)
+    assert traffic.give_way((1.0, 1.0), [], planner) == []
+    assert plain.nearest_on((1.0, 1.0), (0.0, 0.0), (2.0, 0.0)) == (1.0, 0.0)
+    assert plain.nearest_on((3.0, 1.0), (0.0, 0.0), (2.0, 0.0)) == (2.0, 0.0)

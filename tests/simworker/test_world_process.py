@@ -22,7 +22,7 @@ def test_world_process_serves_endpoints_poses_contacts_and_home(bridge):
         sim.home([ROBOT])
         x, y, yaw = sim.pose(ROBOT)
         assert math.dist((x, y), (spec.x, spec.y)) < HOME_TOLERANCE_M and abs(yaw - spec.yaw) < 0.01
-        assert sim.contacts() == 0
+        assert sim.contacts() == 0 and sim.touched() == []
         with pytest.raises(RuntimeError, match="KeyError"):  # the caller's mistake, reported, world still up
             sim.pose("nobody")
         assert sim.pose(ROBOT) == (x, y, yaw)
