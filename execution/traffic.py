@@ -7,7 +7,7 @@ The algorithms are plain (fleetcore.traffic); this module keeps their state in R
    timed path is then reserved under its id, until its step ends. First come, first reserved (prioritized
    planning), one plan at a time across the fleet: a newcomer waits or detours, robots under way are never
    replanned by it. Reservations are heeded WINDOW_S ahead (windowed cooperative A*), so a robot replans from
-   where it is before its window runs out (every REPLAN_S), against what the others reserved meanwhile. Plans
+   where it is before its window runs out (_replan_now), against what the others reserved meanwhile. Plans
    are timed at the robot's real pace (its clock's rate; a nav stack's pace as seen), and a robot keeps to its
    plan's times: it never sets off on a stretch well before the plan says.
 2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the room its footprint
@@ -69,7 +69,8 @@ TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapse
 TURN_POLL_S = 0.05
 PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
 MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
-REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned (its window runs out)
+REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned when nobody else plans...
+REPLAN_LAST_S = plain.WINDOW_S * 0.8  # s ... and before it is replanned in any case (_replan_now)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
@@ -665,7 +666,7 @@ def _moved(goal, end) -> str:
 def _follow(session: Session, path, limits, factor: float, nav: bool, timed: bool) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
     asked for, or the free spot next to it when that was taken). A plan longer than the window is replanned
-    once it is REPLAN_S old.
+    before its window runs out (_replan_now).
 
     A timed robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower
     than the robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then
@@ -677,7 +678,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
     windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
-        if i and windowed and time.time() - planned > REPLAN_S:
+        if i and windowed and _replan_now(time.time() - planned):
             raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
         early = timed and time.time() < due - EARLY_S
@@ -716,6 +717,15 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
                 stall_s=STALL_S,
                 goal=target,
             )
+
+
+def _replan_now(age: float) -> bool:
+    """Whether a windowed plan this old is replanned at this stretch: from REPLAN_S on, when nobody is planning
+    (a replan waits for its turn with the robot standing: in a crowd that was most of the turns' waiting), and
+    in any case once its window has little left (REPLAN_LAST_S)."""
+    if age <= REPLAN_S:
+        return False
+    return age > REPLAN_LAST_S or not coordination.connection().exists(_key("turn"))
 
 
 def _tolerance(here, legs, i: int) -> float:

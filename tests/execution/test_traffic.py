@@ -193,3 +193,17 @@ def test_a_robot_giving_way_backs_straight_off_else_aside_and_never_into_a_shelf
     assert traffic.give_way((1.0, 1.0), [], planner) == []
     assert plain.nearest_on((1.0, 1.0), (0.0, 0.0), (2.0, 0.0)) == (1.0, 0.0)
     assert plain.nearest_on((3.0, 1.0), (0.0, 0.0), (2.0, 0.0)) == (2.0, 0.0)
+
+
+def test_a_windowed_plan_is_replanned_when_nobody_plans_and_before_its_window_runs_out(exec_settings):
+    redis, turn = traffic.coordination.connection(), traffic._key("turn")
+    redis.delete(turn)
+    assert not traffic._replan_now(traffic.REPLAN_S - 1)  # young: followed as it is
+    assert traffic._replan_now(traffic.REPLAN_S + 1)  # due, and the turn is free
+    redis.set(turn, "another robot plans", px=5_000)
+    try:
+        assert not traffic._replan_now(traffic.REPLAN_S + 1)  # it drives on rather than stand in the queue
+        assert traffic._replan_now(traffic.REPLAN_LAST_S + 1)  # its window is nearly out: it waits its turn
+    finally:
+        redis.delete(turn)
+    assert traffic.REPLAN_LAST_S < plain.WINDOW_S
