@@ -254,8 +254,8 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
 
 def longest_trips(robots: dict, names: list[str], starts: dict, goals: dict) -> list[str]:
     """The robot of each model with the longest planned route from its start (robots of one model drive at one
-    speed): the lone runs. A time estimated across models ranked badly (a nav stack's pace measured in the
-    crowd made the Huskies look slowest: alone they were the quickest)."""
+    speed): the lone runs. A time estimated across models (planned length over the robot's top speed, or its
+    nav stack's pace) ranked badly: run o ran three Huskies alone, the quickest robots there are."""
     from execution import route
 
     longest: dict[str, tuple[float, str]] = {}
