@@ -534,18 +534,31 @@ def _renew(redis, robot_id: int) -> None:
 def _check_deadlock(redis, robot_id: int) -> None:
     """If this robot is in a cycle of waits and is the one to give way, it does: Reroute. The one to give way
     has given way least often on its trip, ties to the highest id: a robot whose reroutes did not get it out
-    of the others' way is not asked again and again while they wait."""
-    waits = {str(pk): str(entry["for"]) for pk, entry in _hash(redis, "waits").items()}
-    cycle = plain.wait_cycle(waits, str(robot_id))
-    if not cycle:
-        return
-    given = dict(zip(cycle, redis.hmget(_key("breaks"), cycle), strict=True))
-    if min(cycle, key=lambda pk: (int(given[pk] or 0), -int(pk))) == str(robot_id):
-        redis.incr(_key("deadlocks"))
-        redis.hincrby(_key("breaks"), str(robot_id), 1)
-        held = {pk: (e["a"], e["b"]) for pk, e in _hash(redis, "claims").items() if str(pk) in cycle}
-        log.info("traffic: deadlock among robots %s broken by %s (room held: %s)", cycle, robot_id, held)
-        raise Reroute({int(pk) for pk in cycle} - {robot_id})
+    of the others' way is not asked again and again while they wait.
+
+    Read and decided under a WATCH of the waits, and the breaker's wait dropped in the same transaction: two
+    robots of one cycle checking at once both broke it (run r: the second read the first's count of breaks
+    but still its wait), each backing off and counted as a deadlock."""
+    with redis.pipeline() as pipe:
+        try:
+            pipe.watch(_key("waits"))
+            waits = {str(pk): str(entry["for"]) for pk, entry in _hash(pipe, "waits").items()}
+            cycle = plain.wait_cycle(waits, str(robot_id))
+            if not cycle:
+                return
+            given = dict(zip(cycle, pipe.hmget(_key("breaks"), cycle), strict=True))
+            if min(cycle, key=lambda pk: (int(given[pk] or 0), -int(pk))) != str(robot_id):
+                return
+            held = {pk: (e["a"], e["b"]) for pk, e in _hash(pipe, "claims").items() if str(pk) in cycle}
+            pipe.multi()
+            pipe.hdel(_key("waits"), str(robot_id))
+            pipe.incr(_key("deadlocks"))
+            pipe.hincrby(_key("breaks"), str(robot_id), 1)
+            pipe.execute()
+        except WatchError:  # a wait changed as we read: the next check (NOTE_WAIT_S on) reads it afresh
+            return
+    log.info("traffic: deadlock among robots %s broken by %s (room held: %s)", cycle, robot_id, held)
+    raise Reroute({int(pk) for pk in cycle} - {robot_id})
 
 
 def stretches(path: list[tuple]) -> list[tuple]:

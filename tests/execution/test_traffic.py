@@ -72,7 +72,10 @@ def test_a_wait_for_cycle_is_broken_by_the_robot_that_gave_way_least_then_the_hi
         traffic._check_deadlock(redis, high.pk)
     assert caught.value.around == {low.pk}
     assert traffic.deadlocks() == before + 1
+    traffic._check_deadlock(redis, low.pk)  # broken once: the breaker waits no more, low keeps waiting
+    assert traffic.deadlocks() == before + 1
     # the same two wait for each other again (the reroute did not get high out of low's way): low gives way
+    traffic._put(redis, "waits", high.pk, {"for": low.pk, "expires": 1e12})
     traffic._check_deadlock(redis, high.pk)
     with pytest.raises(traffic.Reroute) as caught:
         traffic._check_deadlock(redis, low.pk)
