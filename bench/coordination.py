@@ -215,12 +215,14 @@ def reset(sim, robots: dict, names) -> None:
 
 def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_s: float) -> dict:
     """Send every robot to its goal at once; wait; measure contacts, deadlocks, completion, makespan."""
+    from django.utils import timezone
+
     from execution import traffic
     from execution.instructions import submit
     from execution.models import Instruction
 
     contacts0, deadlocks0 = sim.contacts(), traffic.deadlocks()
-    started = time.time()
+    started, since = time.time(), timezone.now()
     sent = {}
     for name, (x, y) in goals.items():
         step = {"action": "move", "robots": [name], "destination": {"name": f"G-{name}", "x": x, "y": y}}
@@ -232,6 +234,9 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
             if name not in finished and Instruction.objects.get(pk=pk).is_final:
                 finished[name] = time.time()
         time.sleep(0.2)
+    while traffic.busy_ids() and time.time() - started < limit_s:  # robots that made way on their way back
+        time.sleep(0.2)
+    settled = time.time()
     rows = {name: Instruction.objects.get(pk=pk) for name, pk in sent.items()}
     reached = 0
     for name, row in rows.items():
@@ -239,7 +244,7 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
         goal = execution.steps[0]["destination"] if execution else None
         near = goal is not None and math.dist(sim.pose(name)[:2], (goal["x"], goal["y"])) < 0.3
         reached += int(row.status == "succeeded" and near)
-    makespan = (max(finished.values(), default=time.time()) - started) * time_scale
+    makespan = (settled - started) * time_scale  # every robot done, those that made way back too
     return {
         "robots": len(goals),
         "contacts": sim.contacts() - contacts0,
@@ -249,6 +254,11 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
         "failed": {name: row.outcome[-200:] for name, row in rows.items() if row.status != "succeeded"},
         "finish_s": {name: round((at - started) * time_scale, 1) for name, at in sorted(finished.items())},
         "touched": [list(contact) for contact in sim.touched(contacts0)],
+        "made_way": list(
+            Instruction.objects.filter(source="traffic", received_at__gte=since).values_list(
+                "text", "outcome"
+            )
+        ),
     }
 
 

@@ -26,6 +26,7 @@ from execution.steps import (
 from fleetcore import motion
 from fleetcore.states import Event
 from fleetcore.steps import Destination, Step, parse_task
+from fleetcore.traffic import compass
 from robots import poses as pose_store
 from robots.models import Robot
 
@@ -41,6 +42,45 @@ def go_to(session: Session, step: Step) -> str:
     if step.destination is not None and step.destination.yaw is not None:
         note += _face(session, step.destination.yaw, step.factor)
     return task(session, step) if step.task else f"arrived at {_where(step)}{note}"
+
+
+def make_way(session: Session, step: Step) -> str:
+    """Move off the way of a robot that cannot get past this one (it asked, through the traffic table, or a
+    person did), wait for it to pass and come back to where this one stood."""
+    robot = session.robot
+    request = traffic.way_request(robot)
+    if request is None:
+        return "nobody is waiting for it to make way"
+    other = Robot.objects.filter(pk=request["for"]).values_list("name", flat=True).first() or "another robot"
+    try:
+        home = session.pose()[:2]
+        spot = traffic.aside(robot, home, request)
+        if spot is None:
+            raise StepFailed(
+                f"{robot.name}: no free spot off {other}'s way within {traffic.ASIDE_SEARCH_M:g} m"
+            )
+        Robot.objects.transition(
+            robot.pk, Event.MOVE, f"making way for {other}", session.execution.instruction_id
+        )
+        limits = session.link.limits()
+        _go(session, spot, limits, step.factor)
+        waited = traffic.until_passed(session, request, home)
+        back = _go(session, home, limits, step.factor)
+    except BaseException as exc:  # failed or stopped: the robot waiting for it asks nobody else, goes round
+        traffic.made_way(robot, str(exc) or type(exc).__name__)
+        raise
+    traffic.made_way(robot)
+    return (
+        f"made way for {other}: {math.dist(home, spot):.1f} m {compass(home, spot)}, "
+        f"back after {waited:.0f} s{back}"
+    )
+
+
+def _go(session: Session, goal, limits: motion.Limits, factor: float) -> str:
+    """To a point along a reserved route, by the robot's own navigation or the route driver."""
+    if session.link.nav_kind:
+        return navigate_to(session, tuple(goal), limits)
+    return drive_route(session, tuple(goal), limits, factor)
 
 
 def _face(session: Session, yaw: float, factor: float) -> str:
@@ -189,9 +229,7 @@ def _travel(session: Session, destination: Destination, factor: float) -> str:
     live.goal(session.robot, name, x, y)  # the map draws the goal until the robot is done with it
     limits = session.link.limits()
     try:
-        if session.link.nav_kind:
-            return navigate_to(session, (x, y), limits)
-        return drive_route(session, (x, y), limits, factor)
+        return _go(session, (x, y), limits, factor)
     except StepFailed as exc:
         raise StepFailed(_explain(session, destination, exc)) from exc
     finally:

@@ -86,6 +86,14 @@ PACE_MIN_M = 0.3  # m: a nav stretch shorter than this says little of the stack'
 PACE_WEIGHT = 0.5  # of a new measure of a nav stack's pace against what was known
 EARLY_S = 1.0  # s a robot may set off on a stretch before the time its plan gives
 SLOW_PLAN_MPS = 0.35  # m per s of wall time a fast robot is planned at when its own pace finds no plan
+DETOUR_FACTOR = 1.5  # a way round robots parked in the way longer than this times the way through them...
+DETOUR_M = 4.0  # ... plus this many metres (or none at all): the parked ones are asked to make way
+MAKE_WAY_HOLD_S = 10.0  # s a robot asked to make way is taken to need to leave (claims hold it after)
+MAKE_WAY_TTL_S = 240.0  # s a request to make way lasts (made way and back; refused: not asked again)
+MAKE_WAY_WAIT_S = 120.0  # s a robot that made way waits for the other to pass before it goes back
+MAKE_WAY_POLL_S = 0.5
+ASIDE_STEP = 0.25  # m between the rings (and the points on them) searched for a spot off another's way
+ASIDE_SEARCH_M = 6.0  # m from where it stands a robot making way looks for that spot
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
 
@@ -207,16 +215,21 @@ def plan(
     around: set[int] = frozenset(),
     progress=None,
     settled: bool = False,
+    may_ask: bool = False,
 ) -> list[tuple]:
     """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t), in its
     turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan.
-    settled: the goal is the spot an earlier plan of this trip chose; it moves only if a robot would touch it."""
+    settled: the goal is the spot an earlier plan of this trip chose; it moves only if a robot would touch it.
+    may_ask: robots parked in the way, idle, may be asked to make way (the plan then passes where they stand
+    once they have moved; ask_to_make_way sends them the instruction after the turn)."""
     asked = time.monotonic()
     progress = _now_and_then(progress)
     with planning_turn(robot, progress):
         began = time.monotonic()
-        path = _plan(robot, start, goal, speed, around, progress, settled)
+        path = _plan(robot, start, goal, speed, around, progress, settled, may_ask)
     done = time.monotonic()
+    if may_ask:
+        ask_to_make_way(robot)
     log.info(
         "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
         robot.name,
@@ -267,35 +280,199 @@ def planning_turn(robot: Robot, progress=None):
             redis.eval(coordination.RELEASE, 1, _key("turn"), token)
 
 
-def _plan(robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool) -> list[tuple]:
+def _plan(
+    robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool, may_ask: bool
+) -> list[tuple]:
     """The plan itself: read the table, search (searches(): less demanding each time one finds nothing),
     reserve. Without a map, or with no plan within the searches' bounds, the map route (or the straight line)
-    is reserved as it is."""
+    is reserved as it is. A plan that finds no way past idle robots parked on the map route, or only a long
+    way round them (_detour), passes where they stand once they have made way, when they may be asked."""
     planner = route.planner_for(robot)
     radius = reach(robot)
     now = time.time()
     path = None
     if planner is not None:
-        table, still = obstacles(coordination.connection(), robot.pk, now, around)  # a snapshot: no lock
+        redis = coordination.connection()
+        table, still = obstacles(redis, robot.pk, now, around)  # a snapshot: no lock
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
         exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
         goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            for pace, window in searches(speed):
-                search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now), window_s=window)
-                path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
-                if path is not None:
-                    if window < plain.WINDOW_S:
-                        log.info(
-                            "traffic: %s heeds only the room held now on its way to %s", robot.name, goal
-                        )
-                    break
+            path = _search(robot, planner, start, goal, speed, now, table, still, progress)
+            through = _detour(path, start, goal, planner) if may_ask else None
+            idle = _idle_in_the_way(redis, robot, through, exact) if through else {}
+            if idle:  # the same search with them gone from where they stand after MAKE_WAY_HOLD_S
+                for pk, disc in idle.items():
+                    cells = plain.footprint_cells(disc.a, disc.r)
+                    table.reserve(str(pk), cells, now - 1.0, now + MAKE_WAY_HOLD_S)
+                rest = [(c, since) for c, since in still if int(c.label) not in idle]
+                passing = _search(robot, planner, start, goal, speed, now, table, rest, progress)
+                asked = {pk: disc for pk, disc in idle.items() if passing and _passes(passing, disc, radius)}
+                if asked:  # (a plan that went round them all the same asks nobody)
+                    path = passing
+                    _request_way(redis, robot, asked, through)
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
         path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
     _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
     return path
+
+
+def _search(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress):
+    """The first plan of searches() that finds one, or None."""
+    radius = reach(robot)
+    for pace, window in searches(speed):
+        search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now), window_s=window)
+        path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
+        if path is not None:
+            if window < plain.WINDOW_S:
+                log.info("traffic: %s heeds only the room held now on its way to %s", robot.name, goal)
+            return path
+    return None
+
+
+def _length(points) -> float:
+    return sum(math.dist(a[:2], b[:2]) for a, b in itertools.pairwise(points))
+
+
+def _detour(path, start, goal, planner) -> list[tuple[float, float]] | None:
+    """The map route from start to goal (robots ignored) when the plan found is no way, or a detour from it
+    of more than DETOUR_FACTOR times plus DETOUR_M; else None. The map route is planned only for a plan
+    that is long against the straight line (a tenth of a second on the warehouse's map)."""
+    if path is not None and _length(path) <= DETOUR_FACTOR * math.dist(start, goal) + DETOUR_M:
+        return None
+    through = planner.plan(tuple(start), tuple(goal))
+    if not through or (path is not None and _length(path) <= DETOUR_FACTOR * _length(through) + DETOUR_M):
+        return None
+    return [tuple(start), *through]
+
+
+def _idle_in_the_way(redis, robot: Robot, through, exact) -> dict[int, plain.Capsule]:
+    """The robots standing on the map route (within reach of it) that are idle, not asked before on this
+    trip or refused lately: {id: where they stand}. Robots under traffic, busy ones and others' goals are
+    not idle (a busy robot standing is reserved for a while, not standing for good: obstacles())."""
+    under = set(_hash(redis, "plans")) | set(_hash(redis, "claims")) | set(_hash(redis, "makeway"))
+    return {
+        int(disc.label): disc
+        for disc, since in exact
+        if since == -math.inf and int(disc.label) not in under and _passes(through, disc, reach(robot))
+    }
+
+
+def _passes(path, disc: plain.Capsule, radius: float) -> bool:
+    """Whether a path comes within reach of where a robot stands."""
+    legs = itertools.pairwise(p[:2] for p in path)
+    return any(plain.segment_distance(disc.a, disc.a, a, b) < radius + disc.r + CLAIM_MARGIN for a, b in legs)
+
+
+def _request_way(redis, robot: Robot, idle: dict, through) -> None:
+    """Ask, in the traffic table, the idle robots in the way to make way: sent after the turn
+    (ask_to_make_way), read by their make_way step (way_request)."""
+    points = [[round(p[0], 2), round(p[1], 2)] for p in through]
+    for pk in idle:
+        entry = {"for": robot.pk, "r": reach(robot), "route": points, "sent": False}
+        _put(redis, "makeway", pk, {**entry, "expires": time.time() + MAKE_WAY_TTL_S})
+    log.info("traffic: %s asks %s to make way", robot.name, sorted(idle))
+
+
+def ask_to_make_way(robot: Robot) -> None:
+    """Send each robot this one asked to make way (_request_way) a make_way instruction, as the person whose
+    instruction this robot runs: the robot's lease, schedule and state are checked as for any instruction.
+    A refusal is kept in the table (that robot is not asked again by anyone for MAKE_WAY_TTL_S) and said."""
+    from execution.instructions import submit  # the instruction layer sits on top of the route handlers
+
+    redis = coordination.connection()
+    asked = {pk: e for pk, e in _hash(redis, "makeway").items() if e.get("for") == robot.pk and not e["sent"]}
+    if not asked:
+        return
+    running = Execution.objects.filter(robot=robot, status="running").select_related("instruction__user")
+    user = next((execution.instruction.user for execution in running), None)
+    names = dict(Robot.objects.filter(pk__in=list(asked)).values_list("pk", "name"))
+    for pk, entry in asked.items():
+        step = {"action": "make_way", "robots": [names[pk]]}
+        parse = {"type": "I", "valid": True, "needs_user": False, "steps": [step]}
+        text = f"{names[pk]} make way for {robot.name}"
+        _put(redis, "makeway", pk, {**entry, "sent": True, "refused": ""})  # before its step may read it
+        sent = submit(text, user, source="traffic", parse=parse)
+        if sent.status == "refused":
+            _put(redis, "makeway", pk, {**entry, "sent": True, "refused": sent.outcome})
+            log.info("traffic: %s cannot make way for %s: %s", names[pk], robot.name, sent.outcome)
+
+
+def way_request(robot: Robot) -> dict | None:
+    """What the robot is to make way for: {"for": id, "r": its reach, "route": [[x, y], ...]}; asked by a plan
+    (_request_way), or, for a person who told it to, the first robot waiting for it (along its reserved
+    path). None when nobody needs its room."""
+    redis = coordination.connection()
+    entry = _hash(redis, "makeway").get(robot.pk)
+    if entry is not None:
+        return entry
+    waiting = [pk for pk, wait in _hash(redis, "waits").items() if wait.get("for") == robot.pk]
+    plans = _hash(redis, "plans")
+    for pk in waiting:
+        if pk in plans:
+            return {"for": pk, "r": plans[pk]["r"], "route": plans[pk]["path"]}
+    return None
+
+
+def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
+    """The free spot nearest to `here` where the robot stands clear of the route it makes way for (by both
+    robots' reach and the planning margins) and of the robots standing and the goals reserved; None when
+    there is none within ASIDE_SEARCH_M."""
+    planner = route.planner_for(robot)
+    radius, route_points = reach(robot), [tuple(p) for p in request["route"]]
+    clear = request["r"] + radius + CLAIM_MARGIN + PLAN_MARGIN
+    legs = list(itertools.pairwise(route_points)) or [(route_points[0], route_points[0])]
+
+    def is_free(x: float, y: float) -> bool:
+        if planner is not None and not planner.free(*planner.to_cell(x, y)):
+            return False
+        return all(plain.segment_distance((x, y), (x, y), a, b) >= clear for a, b in legs)
+
+    _, still = obstacles(coordination.connection(), robot.pk, time.time(), {request["for"]})
+    discs = [plain.Disc(c.a[0], c.a[1], c.r, c.label) for c, _ in still if int(c.label) != request["for"]]
+    return plain.free_spot(
+        tuple(here), radius, discs, is_free, prefer=tuple(here), step=ASIDE_STEP, search_m=ASIDE_SEARCH_M,
+        margin=CLAIM_MARGIN + PLAN_MARGIN,
+    )  # fmt: skip
+
+
+def until_passed(session: Session, request: dict, home) -> float:
+    """Wait, standing aside, until the robot made way for has passed `home` (its claim is clear of it and
+    none of its reserved cells near it lies ahead) or is no longer under traffic; at most MAKE_WAY_WAIT_S.
+    Returns the seconds waited."""
+    redis, other, started = coordination.connection(), request["for"], time.monotonic()
+    near = reach(session.robot) + plain.TRAFFIC_CELL
+    clear = request["r"] + reach(session.robot) + CLAIM_MARGIN
+    session.link.halt()
+    while time.monotonic() - started < MAKE_WAY_WAIT_S:
+        plans, claims, now = _hash(redis, "plans"), _hash(redis, "claims"), time.time()
+        if other not in plans and other not in claims:
+            break
+        held = claims.get(other)
+        ahead = any(
+            t1 > now and math.dist(plain.center_of((col, row)), home) < near
+            for col, row, _, t1 in plans.get(other, {}).get("cells", ())
+        )
+        if not ahead and (held is None or plain.segment_distance(home, home, held["a"], held["b"]) > clear):
+            break
+        deadline = time.monotonic() + MAKE_WAY_POLL_S
+        while time.monotonic() < deadline:
+            session.check()
+            session.pose()
+    return time.monotonic() - started
+
+
+def made_way(robot: Robot, failed: str = "") -> None:
+    """The robot is back: its request is done. Or it could not make way: the request stays, refused (the robot
+    that asked goes round it; nobody asks it again for a while)."""
+    redis = coordination.connection()
+    entry = _hash(redis, "makeway").get(robot.pk)
+    if not failed or entry is None:
+        redis.hdel(_key("makeway"), str(robot.pk))
+    else:
+        _put(redis, "makeway", robot.pk, {**entry, "sent": True, "refused": failed})
 
 
 def searches(speed: float) -> list[tuple[float, float]]:
@@ -517,6 +694,9 @@ def _parked(redis, blocker: int, waited: float) -> bool:
     """Whether a robot in the way is parked (go round it), not one under way or about to be (wait for it)."""
     if blocker in _hash(redis, "claims"):
         return False
+    request = _hash(redis, "makeway").get(blocker)
+    if request is not None and request.get("sent") and not request.get("refused"):
+        return False  # it was asked to make way (for this robot or another): it will
     return blocker not in busy_ids() or waited > BUSY_WAIT_S
 
 
@@ -596,7 +776,7 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
         for replans in range(MAX_REPLANS):
             pose = session.pose()
-            path = plan(robot, pose[:2], spot, speed, around, session.check, settled=replans > 0)
+            path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
             spot = path[-1][:2]
             try:
                 _follow(session, path, limits, factor, nav, timed)

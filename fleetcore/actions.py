@@ -104,6 +104,11 @@ ACTIONS: dict[str, Action] = {
             description="go to the robot's dock (its docking action where it has one) or its start pose",
         ),
         Action(
+            "make_way", "motion", State.MOTION, "execution.handlers.make_way", DRIVE, Stop.CANCEL,
+            synonyms=("make way", "make room", "give way", "clear the way", "get out of the way", "step aside"),
+            description="move off the way of a robot waiting for it, and come back once it has passed",
+        ),
+        Action(
             "report_position", "query", State.DIALOG, "execution.handlers.report_position",
             (("odometry", "pose"),), Stop.NONE,
             synonyms=("locate", "where is", "where are", "where are you", "report position",

@@ -27,7 +27,7 @@ def exec_settings(settings):
     return settings
 
 
-def register(sim, keys):
+def register(sim, keys, world="paper"):
     """Register the world's endpoints in the test database; start poses from the world where none was found."""
     from fleetcore.world import load_world
     from places.worlds import load_world_into_db
@@ -36,8 +36,8 @@ def register(sim, keys):
 
     results = register_endpoints([sim.urls[key] for key in keys])
     assert all(result.ok for result in results), [getattr(r, "error", r) for r in results]
-    load_world_into_db("paper")
-    specs = {spec.name: spec for spec in load_world("paper").robots}
+    load_world_into_db(world)
+    specs = {spec.name: spec for spec in load_world(world).robots}
     for robot in Robot.objects.all():
         spec = specs.get(robot.name)
         if spec and not robot.description.get("start_pose_source", "").startswith("/"):
@@ -52,6 +52,14 @@ def turtle_world(exec_settings, transactional_db):
     """The paper world with the turtlebot endpoint registered, at twice real time."""
     with running_world("paper", endpoints=["turtlebot"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["turtlebot"])
+        yield sim
+
+
+@pytest.fixture
+def warehouse_pair(exec_settings, transactional_db):
+    """The warehouse with its Huskies and TurtleBots registered (28 robots), at twice real time."""
+    with running_world("warehouse", endpoints=["husky", "tb3"], time_scale=2.0) as sim:
+        sim.robots = register(sim, ["husky", "tb3"], world="warehouse")
         yield sim
 
 

@@ -2,10 +2,12 @@
 
 import itertools
 import math
+import time
 
 import pytest
 
 from execution.instructions import submit
+from execution.models import Instruction
 from tests.execution.helpers import parse, step, transitions, wait_final
 
 pytestmark = [pytest.mark.slow]
@@ -92,3 +94,36 @@ def test_two_pairs_swapping_places_across_each_others_paths_finish_without_conta
         # On arrival a place may be too tight for a big robot (tiago at robot4's start, robot3 parked beside
         # it): it stops at the nearest free spot and says so.
         assert off < 0.25 or ("its spot was taken" in said and off < 0.6), (name, off, said)
+
+
+@pytest.mark.timeout(300)
+def test_an_idle_robot_parked_in_a_narrow_way_makes_way_and_comes_back(warehouse_pair, fleet_admin):
+    """tb12 parks in the cross aisle's 2 m passage between two shelf racks (x 11.5-12.5), where a Husky
+    (1.2 m across) cannot pass it; the way round is 14.5 m against 5.5 m through, longer at a slow pace than
+    waiting for tb12 to leave. husky6, sent through slowly, asks tb12 to make way: tb12 moves off its route, waits for it to pass and comes back to its spot. Judged by
+    the simulator: both end where they were sent, tb12 was moved aside meanwhile, nobody touched anybody."""
+    sim = warehouse_pair
+    passage, west, east = (12.0, 12.0), (9.5, 12.0), (15.0, 12.0)
+    first = [
+        submit("park tb12", fleet_admin, parse=parse(step(["tb12"], *passage, "passage", speed="fast"))),
+        submit("husky6 west", fleet_admin, parse=parse(step(["husky6"], *west, "west", speed="normal"))),
+    ]
+    assert [wait_final(i, timeout=150).status for i in first] == ["succeeded"] * 2, [i.outcome for i in first]
+    through = submit("husky6 east", fleet_admin, parse=parse(step(["husky6"], *east, "east", speed="slow")))
+    farthest, off_line, deadline = 0.0, 0.0, time.monotonic() + 200
+    while not through.is_final and time.monotonic() < deadline:  # watch both while the Husky goes through
+        farthest = max(farthest, math.dist(sim.pose("tb12")[:2], passage))
+        off_line = max(off_line, abs(sim.pose("husky6")[1] - passage[1]))
+        time.sleep(0.2)
+        through.refresh_from_db()
+    assert through.status == "succeeded", through.outcome
+    made_way = Instruction.objects.get(text="tb12 make way for husky6")
+    made_way = wait_final(made_way, timeout=120)
+    assert made_way.status == "succeeded" and made_way.outcome.startswith(
+        "tb12: succeeded (made way for husky6"
+    ), made_way.outcome
+    assert off_line < 0.5  # the Husky went through the passage, not round the racks
+    assert farthest > 1.0  # it moved off the Husky's way (its spot to the passage's side is off the rack)
+    assert math.dist(sim.pose("husky6")[:2], east) < 0.3
+    assert math.dist(sim.pose("tb12")[:2], passage) < 0.3  # and it came back
+    assert contacts(sim) == []

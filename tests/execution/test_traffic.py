@@ -210,3 +210,32 @@ def test_a_windowed_plan_is_replanned_when_nobody_plans_and_before_its_window_ru
     finally:
         redis.delete(turn)
     assert traffic.REPLAN_LAST_S < plain.WINDOW_S
+
+
+def test_a_robot_making_way_stands_clear_of_the_route_it_makes_way_for_as_near_as_it_can(robots):
+    b = robots["b"]
+    request = {"for": robots["a"].pk, "r": 0.5, "route": [[-4.0, -2.0], [4.0, -2.0]]}
+    spot = traffic.aside(b, (0.0, -2.0), request)
+    clear = 0.5 + traffic.reach(b) + traffic.CLAIM_MARGIN + traffic.PLAN_MARGIN
+    assert spot is not None and clear <= abs(spot[1] + 2.0) <= clear + 2 * traffic.ASIDE_STEP, spot
+    planner = traffic.route.planner_for(b)
+    assert planner.free(*planner.to_cell(*spot))
+
+
+def test_only_idle_robots_on_the_route_are_asked_to_make_way_and_one_asked_is_waited_for(robots):
+    a, b, c = robots["a"], robots["b"], robots["c"]
+    redis = traffic.coordination.connection()
+    _, still = traffic.obstacles(redis, a.pk, time.time())
+    through = [(-4.0, -2.0), (4.0, -2.0)]  # b stands on it, c far from it
+    assert set(traffic._idle_in_the_way(redis, a, through, still)) == {b.pk}
+    assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0)) is None  # b under traffic now: not idle
+    assert traffic._idle_in_the_way(redis, a, through, still) == {}
+    traffic.release(b, (0.0, -2.0, 0.0))
+    assert traffic._parked(redis, b.pk, waited=5.0)  # parked, not asked: go round it
+    traffic._put(redis, "makeway", b.pk, {"for": a.pk, "sent": True, "refused": "", "expires": 1e12})
+    assert not traffic._parked(redis, b.pk, waited=5.0)  # asked: it will make way, wait for it
+    assert traffic._idle_in_the_way(redis, c, through, still) == {}  # and nobody else asks it meanwhile
+    traffic.made_way(b, "no free spot off a's way")  # it could not: go round it after all
+    assert traffic._parked(redis, b.pk, waited=5.0)
+    traffic.made_way(b)  # back where it was: asked no more
+    assert traffic.way_request(b) is None

@@ -164,3 +164,16 @@ def test_every_registered_name_is_understood(name):
     result = interpret(f"move {name} to A", grammar).as_dict()
     assert result["type"] == "I", result["question"]
     assert result["steps"][0]["robots"] == [name]
+
+
+@pytest.mark.parametrize("text", ["husky, make way", "tiago make room", "turtlebot get out of the way"])
+def test_make_way_is_an_instruction_to_the_robot_named(grammar, text):
+    result = run(grammar, text)
+    assert result["valid"] and not result["needs_user"], result
+    assert [(s["action"], s["robots"]) for s in result["steps"]] == [
+        ("make_way", [text.split()[0].strip(",")])
+    ]
+
+
+def test_make_your_way_is_still_a_move(grammar):
+    assert run(grammar, "husky make your way to B")["steps"][0]["action"] == "move"
