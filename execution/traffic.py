@@ -20,6 +20,9 @@ The algorithms are plain (fleetcore.traffic); this module keeps their state in R
    by one of its robots (the one that gave way least often, then the highest id), which drops its claim ahead
    and replans around the robots of the cycle.
    A robot waiting on one that is parked (not under traffic) goes around it after REROUTE_AFTER_S.
+4. Making way. An idle robot parked where another finds no way past it, or only a long one (_detour), is
+   asked to make way (ask_to_make_way: an instruction of its own, as any person's would be checked); its
+   make_way step moves it off the other's route (aside), waits for it to pass (until_passed) and comes back.
 
 Robots with their own navigation stack take the same route as goals, one stretch at a time, each claimed
 first: their goals never conflict with the reservations (execution.steps.navigate).
@@ -81,9 +84,10 @@ CORNER_TOLERANCE = 0.05  # m: ... but a corner (a turn sharper than CORNER_TURN)
 CORNER_TURN = 0.35  # rad: a turn of the route sharper than this is a corner
 NAV_STALL_S = 15.0  # s a nav stack may spend on its own recoveries without progress (move_base's take ~10 s)
 MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
-NAV_PACE_GUESS = 0.5  # of a nav stack's top speed (at most 0.22 m/s): its pace until one is measured
+NAV_PACE_GUESS = 0.5  # of a nav stack's top speed (at most 0.22 m/s): its stretches are given time at it
 PACE_MIN_M = 0.3  # m: a nav stretch shorter than this says little of the stack's pace
 PACE_WEIGHT = 0.5  # of a new measure of a nav stack's pace against what was known
+PACE_REPLAN = 0.3  # a nav stack seen this much faster or slower than its plan was timed at replans
 EARLY_S = 1.0  # s a robot may set off on a stretch before the time its plan gives
 SLOW_PLAN_MPS = 0.35  # m per s of wall time a fast robot is planned at when its own pace finds no plan
 DETOUR_FACTOR = 1.5  # a way round robots parked in the way longer than this times the way through them...
@@ -762,12 +766,6 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     Returns "" at the goal, or words on the free spot it stopped at when a robot stood on the goal."""
     robot = session.robot
     _measure_clock(session)
-    learned = known_pace(robot.pk) if nav else None
-    pace = learned or limits.linear * factor  # m per second of the robot's clock
-    timed = (
-        not nav or learned is not None
-    )  # a nav stack's pace unknown yet: it is not held to the plan's times
-    speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
     around: set[int] = set()
     reroutes = 0
     here = session.pose()[:2]
@@ -776,10 +774,12 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
         for replans in range(MAX_REPLANS):
             pose = session.pose()
+            pace = _pace(robot, limits, factor, nav)
+            speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
             path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
             spot = path[-1][:2]
             try:
-                _follow(session, path, limits, factor, nav, timed)
+                _follow(session, path, limits, factor, pace if nav else None)
                 return _moved(tuple(goal), path[-1][:2])
             except Replan:
                 continue
@@ -856,15 +856,18 @@ def _moved(goal, end) -> str:
     return f" (its spot was taken: it stopped {distance:.1f} m {plain.compass(goal, end)} of it)"
 
 
-def _follow(session: Session, path, limits, factor: float, nav: bool, timed: bool) -> None:
+def _follow(session: Session, path, limits, factor: float, nav_pace: float | None) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
     asked for, or the free spot next to it when that was taken). A plan longer than the window is replanned
     before its window runs out (_replan_now).
 
-    A timed robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower
-    than the robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then
-    there. A nav stack drives at a pace of its own, which the plan learns (known_pace); until it is known, the
-    claims alone hold the robot. A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
+    A robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower than the
+    robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then there. A
+    nav stack drives at a pace of its own (nav_pace: the one its plan was timed at, a guess until it has been
+    seen), which the plan learns (known_pace); once the pace seen is off the plan's by more than PACE_REPLAN, it
+    replans at it. (Nav stacks not held to a guessed pace ran at up to 4.5 times it, early against every reservation
+    on the way: 4 of the 5 deadlocks of run t were between them and robots keeping to their plans.)
+    A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
@@ -874,7 +877,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
         if i and windowed and _replan_now(time.time() - planned):
             raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
-        early = timed and time.time() < due - EARLY_S
+        early = time.time() < due - EARLY_S
         if hold or early:  # a planned wait, or early: keep to the plan's times
             _hold(session, t if hold else due - EARLY_S)
         due = t
@@ -885,7 +888,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
         last = i == len(legs) - 1
         target = tuple(goal) if last else (x, y)
         distance = math.dist(pose[:2], target)
-        if nav:
+        if nav_pace is not None:
             limit = travel_time(distance * 1.5, math.pi, limits, factor)
             sent = time.monotonic()
             try:
@@ -900,6 +903,8 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
                 )
                 continue
             _note_pace(session, distance, time.monotonic() - sent)
+            if not last and _off_pace(robot.pk, nav_pace):
+                raise Replan()
         else:
             tolerance = motion.TOLERANCE if last else _tolerance(pose[:2], legs, i)
             controller = motion.GoToGoal(target, limits, factor, tolerance)
@@ -910,6 +915,23 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, timed: boo
                 stall_s=STALL_S,
                 goal=target,
             )
+
+
+def _pace(robot: Robot, limits: motion.Limits, factor: float, nav: bool) -> float:
+    """The pace a robot's plan is timed at (m per second of its clock): its speed limit at the factor asked
+    for; a nav stack's pace as seen, and until it is seen, the robot's speed limit. A plan faster than the
+    robot only makes it late against its reservations, where the claims hold it; after its first stretch
+    it replans at the pace seen (_off_pace). (A guess slower than the stack, 0.11 m/s for a TIAGo driving
+    0.5, made plans longer than the search's horizon, and robots early against all of them.)"""
+    if not nav:
+        return limits.linear * factor
+    return known_pace(robot.pk) or limits.linear
+
+
+def _off_pace(robot_id: int, planned: float) -> bool:
+    """Whether the nav stack's pace, as seen, is off the pace its plan was timed at by more than PACE_REPLAN."""
+    seen = known_pace(robot_id)
+    return seen is not None and abs(seen - planned) > PACE_REPLAN * planned
 
 
 def _replan_now(age: float) -> bool:
