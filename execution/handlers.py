@@ -31,6 +31,7 @@ from robots import poses as pose_store
 from robots.models import Robot
 
 STALL_TRIES, BACK_OFF_S = 2, 1.0  # after a stall: back off and plan again (or send the goal afresh) twice
+BACK_REVERSE = 0.25  # of the robot's top speed, backing off
 NEAR_M = 0.3  # m between two robots' reach discs: the other one is what stands in the way
 DOCK_LIMIT_S = 120.0
 STUCK = "robot_stuck"  # the alert kind a stall raises
@@ -322,9 +323,15 @@ def in_the_way(robot: Robot, at: tuple[float, float], goal: tuple[float, float])
 
 
 def back_off(session: Session, limits: motion.Limits) -> None:
-    """Reverse slowly for a moment, to leave room to turn."""
+    """Reverse slowly for a moment, to leave room to turn: only into room it has claimed (a robot standing or
+    waiting behind it keeps it where it is; run w: a Husky that stalled backed blind into a TurtleBot)."""
+    x, y, yaw = session.pose()
+    reach = BACK_REVERSE * limits.linear * BACK_OFF_S * session.link.clock.rate + traffic.APPROACH_SLACK
+    behind = (x - reach * math.cos(yaw), y - reach * math.sin(yaw))
+    if traffic.claim(session.robot, (x, y), behind, session.check) is not None:
+        return
     until = time.monotonic() + BACK_OFF_S
     while time.monotonic() < until:
-        session.send(-0.25 * limits.linear, 0.0)
+        session.send(-BACK_REVERSE * limits.linear, 0.0)
         session.pose()
     session.link.halt()

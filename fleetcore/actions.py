@@ -107,6 +107,7 @@ ACTIONS: dict[str, Action] = {
             "make_way", "motion", State.MOTION, "execution.handlers.make_way", DRIVE, Stop.CANCEL,
             synonyms=("make way", "make room", "give way", "clear the way", "get out of the way", "step aside"),
             description="move off the way of a robot waiting for it, and come back once it has passed",
+            unnamed="all",
         ),
         Action(
             "report_position", "query", State.DIALOG, "execution.handlers.report_position",

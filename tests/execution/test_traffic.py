@@ -3,6 +3,7 @@
 import itertools
 import math
 import time
+import types
 
 import pytest
 from django.core.cache import cache
@@ -239,3 +240,34 @@ def test_only_idle_robots_on_the_route_are_asked_to_make_way_and_one_asked_is_wa
     assert traffic._parked(redis, b.pk, waited=5.0)
     traffic.made_way(b)  # back where it was: asked no more
     assert traffic.way_request(b) is None
+
+
+class StandingSession:
+    """What back_off uses of a Session: a robot at a fixed pose that records the velocities it is sent."""
+
+    def __init__(self, robot, pose):
+        self.robot, self._pose, self.sent = robot, pose, []
+        self.link = types.SimpleNamespace(clock=motion.ClockRate(), halt=lambda: None)
+
+    def pose(self):
+        return self._pose
+
+    def send(self, linear, angular):
+        self.sent.append((linear, angular))
+
+    def check(self):
+        pass
+
+
+def test_a_stalled_robot_backs_off_only_into_room_it_has_claimed(robots):
+    from execution.handlers import back_off
+
+    a, b = robots["a"], robots["b"]
+    limits = motion.Limits(linear=0.5, angular=1.0)
+    cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": -2.45, "y": 0.0, "yaw": 0.0}, 60)
+    blocked = StandingSession(a, (-2.0, 0.0, 0.0))  # heading east, b right behind it
+    back_off(blocked, limits)
+    assert blocked.sent == []
+    free = StandingSession(a, (-2.0, 0.0, math.pi))  # heading west, b ahead of it: nobody behind
+    back_off(free, limits)
+    assert free.sent and all(linear < 0 for linear, _ in free.sent)

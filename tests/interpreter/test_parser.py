@@ -175,5 +175,9 @@ def test_make_way_is_an_instruction_to_the_robot_named(grammar, text):
     ]
 
 
+def test_make_way_said_to_nobody_is_said_to_every_robot(grammar):
+    assert run(grammar, "make way")["steps"][0]["robots"] == "all"
+
+
 def test_make_your_way_is_still_a_move(grammar):
     assert run(grammar, "husky make your way to B")["steps"][0]["action"] == "move"
