@@ -444,7 +444,7 @@ def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
 
 def until_passed(session: Session, request: dict, home) -> float:
     """Wait, standing aside, until the robot made way for has passed `home` (its claim is clear of it and
-    none of its reserved cells near it lies ahead) or is no longer under traffic; at most MAKE_WAY_WAIT_S.
+    none of its reserved cells near it lies ahead) or is done with its instruction; at most MAKE_WAY_WAIT_S.
     Returns the seconds waited."""
     redis, other, started = coordination.connection(), request["for"], time.monotonic()
     near = reach(session.robot) + plain.TRAFFIC_CELL
@@ -452,8 +452,8 @@ def until_passed(session: Session, request: dict, home) -> float:
     session.link.halt()
     while time.monotonic() - started < MAKE_WAY_WAIT_S:
         plans, claims, now = _hash(redis, "plans"), _hash(redis, "claims"), time.time()
-        if other not in plans and other not in claims:
-            break
+        if other not in plans and other not in claims and other not in busy_ids():
+            break  # done (between two tries of a stalled trip it is out of the tables, not done: run w)
         held = claims.get(other)
         ahead = any(
             t1 > now and math.dist(plain.center_of((col, row)), home) < near
