@@ -87,7 +87,6 @@ MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes()
 NAV_PACE_GUESS = 0.5  # of a nav stack's top speed (at most 0.22 m/s): its stretches are given time at it
 PACE_MIN_M = 0.3  # m: a nav stretch shorter than this says little of the stack's pace
 PACE_WEIGHT = 0.5  # of a new measure of a nav stack's pace against what was known
-PACE_REPLAN = 0.3  # a nav stack seen this much faster or slower than its plan was timed at replans
 EARLY_S = 1.0  # s a robot may set off on a stretch before the time its plan gives
 SLOW_PLAN_MPS = 0.35  # m per s of wall time a fast robot is planned at when its own pace finds no plan
 DETOUR_FACTOR = 1.5  # a way round robots parked in the way longer than this times the way through them...
@@ -779,7 +778,7 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
             path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
             spot = path[-1][:2]
             try:
-                _follow(session, path, limits, factor, pace if nav else None)
+                _follow(session, path, limits, factor, nav, guessed=nav and known_pace(robot.pk) is None)
                 return _moved(tuple(goal), path[-1][:2])
             except Replan:
                 continue
@@ -856,16 +855,15 @@ def _moved(goal, end) -> str:
     return f" (its spot was taken: it stopped {distance:.1f} m {plain.compass(goal, end)} of it)"
 
 
-def _follow(session: Session, path, limits, factor: float, nav_pace: float | None) -> None:
+def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: bool = False) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
     asked for, or the free spot next to it when that was taken). A plan longer than the window is replanned
     before its window runs out (_replan_now).
 
     A robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower than the
     robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then there. A
-    nav stack drives at a pace of its own (nav_pace: the one its plan was timed at, a guess until it has been
-    seen), which the plan learns (known_pace); once the pace seen is off the plan's by more than PACE_REPLAN, it
-    replans at it. (Nav stacks not held to a guessed pace ran at up to 4.5 times it, early against every reservation
+    nav stack drives at a pace of its own, which the plan learns (known_pace); a plan timed at a guess
+    (guessed: the pace was not seen yet) is replanned once the first stretch has shown it. (Nav stacks not held to a guessed pace ran at up to 4.5 times it, early against every reservation
     on the way: 4 of the 5 deadlocks of run t were between them and robots keeping to their plans.)
     A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
@@ -888,7 +886,7 @@ def _follow(session: Session, path, limits, factor: float, nav_pace: float | Non
         last = i == len(legs) - 1
         target = tuple(goal) if last else (x, y)
         distance = math.dist(pose[:2], target)
-        if nav_pace is not None:
+        if nav:
             limit = travel_time(distance * 1.5, math.pi, limits, factor)
             sent = time.monotonic()
             try:
@@ -903,7 +901,7 @@ def _follow(session: Session, path, limits, factor: float, nav_pace: float | Non
                 )
                 continue
             _note_pace(session, distance, time.monotonic() - sent)
-            if not last and _off_pace(robot.pk, nav_pace):
+            if guessed and not last and known_pace(robot.pk) is not None:
                 raise Replan()
         else:
             tolerance = motion.TOLERANCE if last else _tolerance(pose[:2], legs, i)
@@ -921,17 +919,11 @@ def _pace(robot: Robot, limits: motion.Limits, factor: float, nav: bool) -> floa
     """The pace a robot's plan is timed at (m per second of its clock): its speed limit at the factor asked
     for; a nav stack's pace as seen, and until it is seen, the robot's speed limit. A plan faster than the
     robot only makes it late against its reservations, where the claims hold it; after its first stretch
-    it replans at the pace seen (_off_pace). (A guess slower than the stack, 0.11 m/s for a TIAGo driving
+    it replans at the pace seen (_follow). (A guess slower than the stack, 0.11 m/s for a TIAGo driving
     0.5, made plans longer than the search's horizon, and robots early against all of them.)"""
     if not nav:
         return limits.linear * factor
     return known_pace(robot.pk) or limits.linear
-
-
-def _off_pace(robot_id: int, planned: float) -> bool:
-    """Whether the nav stack's pace, as seen, is off the pace its plan was timed at by more than PACE_REPLAN."""
-    seen = known_pace(robot_id)
-    return seen is not None and abs(seen - planned) > PACE_REPLAN * planned
 
 
 def _replan_now(age: float) -> bool:
