@@ -773,13 +773,12 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
         for replans in range(MAX_REPLANS):
             pose = session.pose()
-            learned = known_pace(robot.pk) if nav else None
-            pace = _pace(limits, factor, nav, learned)
+            pace = _pace(robot, limits, factor, nav)
             speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
             path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
             spot = path[-1][:2]
             try:
-                _follow(session, path, limits, factor, nav, guessed=nav and learned is None)
+                _follow(session, path, limits, factor, nav, guessed=nav and known_pace(robot.pk) is None)
                 return _moved(tuple(goal), path[-1][:2])
             except Replan:
                 continue
@@ -864,9 +863,8 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
     A robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower than the
     robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then there. A
     nav stack drives at a pace of its own, which the plan learns (known_pace); a plan timed at a guess
-    (guessed: the pace was not seen yet) is replanned once the first stretch has shown it. (Nav stacks not
-    held to a guessed pace ran at up to 4.5 times it, early against every reservation on the way: 4 of the
-    5 deadlocks of run t were between them and robots keeping to their plans.)
+    (guessed: the pace was not seen yet) is replanned once the first stretch has shown it. (Nav stacks not held to a guessed pace ran at up to 4.5 times it, early against every reservation
+    on the way: 4 of the 5 deadlocks of run t were between them and robots keeping to their plans.)
     A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
@@ -917,15 +915,15 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
             )
 
 
-def _pace(limits: motion.Limits, factor: float, nav: bool, learned: float | None) -> float:
+def _pace(robot: Robot, limits: motion.Limits, factor: float, nav: bool) -> float:
     """The pace a robot's plan is timed at (m per second of its clock): its speed limit at the factor asked
-    for; a nav stack's pace as seen (learned), and until it is seen, the robot's speed limit. A plan faster than the
+    for; a nav stack's pace as seen, and until it is seen, the robot's speed limit. A plan faster than the
     robot only makes it late against its reservations, where the claims hold it; after its first stretch
     it replans at the pace seen (_follow). (A guess slower than the stack, 0.11 m/s for a TIAGo driving
     0.5, made plans longer than the search's horizon, and robots early against all of them.)"""
     if not nav:
         return limits.linear * factor
-    return learned or limits.linear
+    return known_pace(robot.pk) or limits.linear
 
 
 def _replan_now(age: float) -> bool:
