@@ -352,10 +352,12 @@ def _detour(path, start, goal, planner) -> list[tuple[float, float]] | None:
 
 
 def _idle_in_the_way(redis, robot: Robot, through, exact) -> dict[int, plain.Capsule]:
-    """The robots standing on the map route (within reach of it) that are idle, not asked before on this
-    trip or refused lately: {id: where they stand}. Robots under traffic, busy ones and others' goals are
-    not idle (a busy robot standing is reserved for a while, not standing for good: obstacles())."""
-    under = set(_hash(redis, "plans")) | set(_hash(redis, "claims")) | set(_hash(redis, "makeway"))
+    """The robots standing on the map route (within reach of it) that are idle, not asked already, not
+    refused lately and not made way for this robot lately: {id: where they stand}. Robots under traffic,
+    busy ones and others' goals are not idle (a busy robot standing is reserved for a while, not standing for
+    good: obstacles())."""
+    asked = {pk for pk, e in _hash(redis, "makeway").items() if not e.get("done") or e["for"] == robot.pk}
+    under = set(_hash(redis, "plans")) | set(_hash(redis, "claims")) | asked
     return {
         int(disc.label): disc
         for disc, since in exact
@@ -409,7 +411,7 @@ def way_request(robot: Robot) -> dict | None:
     path). None when nobody needs its room."""
     redis = coordination.connection()
     entry = _hash(redis, "makeway").get(robot.pk)
-    if entry is not None:
+    if entry is not None and not entry.get("done") and not entry.get("refused"):
         return entry
     waiting = [pk for pk, wait in _hash(redis, "waits").items() if wait.get("for") == robot.pk]
     plans = _hash(redis, "plans")
@@ -468,14 +470,15 @@ def until_passed(session: Session, request: dict, home) -> float:
 
 
 def made_way(robot: Robot, failed: str = "") -> None:
-    """The robot is back: its request is done. Or it could not make way: the request stays, refused (the robot
-    that asked goes round it; nobody asks it again for a while)."""
+    """The robot is back: its request is done, and stays so until it lapses (the robot that asked does not ask
+    it again on a later plan of its trip; another robot may). Or it could not make way: the request stays,
+    refused (the robot that asked goes round it; nobody asks it again for a while)."""
     redis = coordination.connection()
     entry = _hash(redis, "makeway").get(robot.pk)
-    if not failed or entry is None:
-        redis.hdel(_key("makeway"), str(robot.pk))
-    else:
-        _put(redis, "makeway", robot.pk, {**entry, "sent": True, "refused": failed})
+    if entry is None:
+        return
+    outcome = {"refused": failed} if failed else {"done": True}
+    _put(redis, "makeway", robot.pk, {**entry, "sent": True, "refused": "", **outcome})
 
 
 def searches(speed: float) -> list[tuple[float, float]]:
@@ -698,7 +701,7 @@ def _parked(redis, blocker: int, waited: float) -> bool:
     if blocker in _hash(redis, "claims"):
         return False
     request = _hash(redis, "makeway").get(blocker)
-    if request is not None and request.get("sent") and not request.get("refused"):
+    if request is not None and request.get("sent") and not request.get("refused") and not request.get("done"):
         return False  # it was asked to make way (for this robot or another): it will
     return blocker not in busy_ids() or waited > BUSY_WAIT_S
 
@@ -773,12 +776,13 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
         for replans in range(MAX_REPLANS):
             pose = session.pose()
-            pace = _pace(robot, limits, factor, nav)
+            learned = known_pace(robot.pk) if nav else None
+            pace = _pace(limits, factor, nav, learned)
             speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
             path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
             spot = path[-1][:2]
             try:
-                _follow(session, path, limits, factor, nav, guessed=nav and known_pace(robot.pk) is None)
+                _follow(session, path, limits, factor, nav, guessed=nav and learned is None)
                 return _moved(tuple(goal), path[-1][:2])
             except Replan:
                 continue
@@ -863,8 +867,9 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
     A robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower than the
     robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then there. A
     nav stack drives at a pace of its own, which the plan learns (known_pace); a plan timed at a guess
-    (guessed: the pace was not seen yet) is replanned once the first stretch has shown it. (Nav stacks not held to a guessed pace ran at up to 4.5 times it, early against every reservation
-    on the way: 4 of the 5 deadlocks of run t were between them and robots keeping to their plans.)
+    (guessed: the pace was not seen yet) is replanned once the first stretch has shown it. (Nav stacks not
+    held to a guessed pace ran at up to 4.5 times it, early against every reservation on the way: 4 of the
+    5 deadlocks of run t were between them and robots keeping to their plans.)
     A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
@@ -915,15 +920,15 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
             )
 
 
-def _pace(robot: Robot, limits: motion.Limits, factor: float, nav: bool) -> float:
+def _pace(limits: motion.Limits, factor: float, nav: bool, learned: float | None) -> float:
     """The pace a robot's plan is timed at (m per second of its clock): its speed limit at the factor asked
-    for; a nav stack's pace as seen, and until it is seen, the robot's speed limit. A plan faster than the
-    robot only makes it late against its reservations, where the claims hold it; after its first stretch
-    it replans at the pace seen (_follow). (A guess slower than the stack, 0.11 m/s for a TIAGo driving
-    0.5, made plans longer than the search's horizon, and robots early against all of them.)"""
+    for; a nav stack's pace as seen (learned), and until it is seen, the robot's speed limit. A plan faster
+    than the robot only makes it late against its reservations, where the claims hold it; after its first
+    stretch it replans at the pace seen (_follow). (A guess slower than the stack, 0.11 m/s for a TIAGo
+    driving 0.5, made plans longer than the search's horizon, and robots early against all of them.)"""
     if not nav:
         return limits.linear * factor
-    return known_pace(robot.pk) or limits.linear
+    return learned or limits.linear
 
 
 def _replan_now(age: float) -> bool:

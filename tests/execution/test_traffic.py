@@ -238,8 +238,24 @@ def test_only_idle_robots_on_the_route_are_asked_to_make_way_and_one_asked_is_wa
     assert traffic._idle_in_the_way(redis, c, through, still) == {}  # and nobody else asks it meanwhile
     traffic.made_way(b, "no free spot off a's way")  # it could not: go round it after all
     assert traffic._parked(redis, b.pk, waited=5.0)
-    traffic.made_way(b)  # back where it was: asked no more
+    traffic.made_way(b)  # back where it was: asked no more, not by a again on this trip
     assert traffic.way_request(b) is None
+    assert traffic._parked(redis, b.pk, waited=5.0)
+    assert traffic._idle_in_the_way(redis, a, through, still) == {}
+    assert set(traffic._idle_in_the_way(redis, c, through, still)) == {b.pk}  # another robot may ask it
+
+
+def test_a_robot_that_made_way_is_not_asked_again_by_the_same_robot(robots):
+    a, b = robots["a"], robots["b"]
+    redis = traffic.coordination.connection()
+    _, still = traffic.obstacles(redis, a.pk, time.time())
+    through = [(-4.0, -2.0), (4.0, -2.0)]
+    traffic._request_way(redis, a, {b.pk: None}, through)
+    assert traffic.way_request(b)["for"] == a.pk
+    traffic.made_way(b)
+    assert traffic._idle_in_the_way(redis, a, through, still) == {}  # a replans: b stands there again
+    redis.hdel(traffic._key("makeway"), str(b.pk))  # the request has lapsed (MAKE_WAY_TTL_S)
+    assert set(traffic._idle_in_the_way(redis, a, through, still)) == {b.pk}
 
 
 class StandingSession:
