@@ -97,6 +97,8 @@ MAKE_WAY_WAIT_S = 120.0  # s a robot that made way waits for the other to pass b
 MAKE_WAY_POLL_S = 0.5
 ASIDE_STEP = 0.25  # m between the rings (and the points on them) searched for a spot off another's way
 ASIDE_SEARCH_M = 6.0  # m from where it stands a robot making way looks for that spot
+PLAN_AGAIN_S = 3.0  # s a robot that found no plan clear of the reservations waits before it plans again...
+PLAN_TRIES = 4  # ... at most this many times; then it plans heeding only the room held now (searches())
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
 
@@ -217,22 +219,27 @@ def plan(
     speed: float,
     around: set[int] = frozenset(),
     progress=None,
-    settled: bool = False,
     may_ask: bool = False,
-) -> list[tuple]:
+    patient: bool = False,
+) -> list[tuple] | None:
     """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t), in its
     turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan.
-    settled: the goal is the spot an earlier plan of this trip chose; it moves only if a robot would touch it.
     may_ask: robots parked in the way, idle, may be asked to make way (the plan then passes where they stand
-    once they have moved; ask_to_make_way sends them the instruction after the turn)."""
+    once they have moved; ask_to_make_way sends them the instruction after the turn).
+    patient: None when no plan heeds the others' reservations (the robot waits and plans again: travel)."""
     asked = time.monotonic()
     progress = _now_and_then(progress)
     with planning_turn(robot, progress):
         began = time.monotonic()
-        path = _plan(robot, start, goal, speed, around, progress, settled, may_ask)
+        path = _plan(robot, start, goal, speed, around, progress, may_ask, patient)
     done = time.monotonic()
     if may_ask:
         ask_to_make_way(robot)
+    if path is None:
+        log.info(
+            "traffic: %s has no plan clear of the others' reservations yet (%.2f s)", robot.name, done - began
+        )
+        return None
     log.info(
         "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
         robot.name,
@@ -284,12 +291,13 @@ def planning_turn(robot: Robot, progress=None):
 
 
 def _plan(
-    robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool, may_ask: bool
-) -> list[tuple]:
+    robot: Robot, start, goal, speed: float, around: set[int], progress, may_ask: bool, patient: bool,
+) -> list[tuple] | None:  # fmt: skip
     """The plan itself: read the table, search (searches(): less demanding each time one finds nothing),
     reserve. Without a map, or with no plan within the searches' bounds, the map route (or the straight line)
     is reserved as it is. A plan that finds no way past idle robots parked on the map route, or only a long
-    way round them (_detour), passes where they stand once they have made way, when they may be asked."""
+    way round them (_detour), passes where they stand once they have made way, when they may be asked.
+    Patient, a plan that heeds the others' reservations or none (its old plan dropped: it is void)."""
     planner = route.planner_for(robot)
     radius = reach(robot)
     now = time.time()
@@ -299,9 +307,11 @@ def _plan(
         table, still = obstacles(redis, robot.pk, now, around)  # a snapshot: no lock
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
         exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
-        goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
+        goal = free_goal(robot, goal, radius, still, planner, start)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            path = _search(robot, planner, start, goal, speed, now, table, still, progress)
+            path = _search(robot, planner, start, goal, speed, now, table, still, progress, patient)
+            if path is None and any(since > now for _, since in still):
+                path = _search_past_goals(robot, planner, start, goal, speed, now, table, still, progress)
             through = _detour(path, start, goal, planner) if may_ask else None
             idle = _idle_in_the_way(redis, robot, through, exact) if through else {}
             if idle:  # the same search with them gone from where they stand after MAKE_WAY_HOLD_S
@@ -309,11 +319,14 @@ def _plan(
                     cells = plain.footprint_cells(disc.a, disc.r)
                     table.reserve(str(pk), cells, now - 1.0, now + MAKE_WAY_HOLD_S)
                 rest = [(c, since) for c, since in still if int(c.label) not in idle]
-                passing = _search(robot, planner, start, goal, speed, now, table, rest, progress)
+                passing = _search(robot, planner, start, goal, speed, now, table, rest, progress, patient)
                 asked = {pk: disc for pk, disc in idle.items() if passing and _passes(passing, disc, radius)}
                 if asked:  # (a plan that went round them all the same asks nobody)
                     path = passing
                     _request_way(redis, robot, asked, through)
+        if path is None and patient:
+            redis.hdel(_key("plans"), str(robot.pk))
+            return None
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
@@ -322,10 +335,12 @@ def _plan(
     return path
 
 
-def _search(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress):
-    """The first plan of searches() that finds one, or None."""
+def _search(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress, patient):
+    """The first plan of searches() that finds one (patient: of those that heed reservations), or None."""
     radius = reach(robot)
     for pace, window in searches(speed):
+        if patient and window < plain.WINDOW_S:
+            break
         search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now), window_s=window)
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
@@ -333,6 +348,16 @@ def _search(robot: Robot, planner, start, goal, speed: float, now: float, table,
                 log.info("traffic: %s heeds only the room held now on its way to %s", robot.name, goal)
             return path
     return None
+
+
+def _search_past_goals(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress):
+    """A plan heeding the reservations and the robots standing, not the goals others are yet to reach: one of
+    them may close the only way for good (a TurtleBot's in the cross aisle, 2 m wide, to a Husky). The robot
+    passes there when that one has arrived as it passes any robot standing: waiting for it while it is busy,
+    or asking it to make way. (Run B of 2026-11-24: Huskies and a TIAGo found no plan for a minute, waiting
+    and planning again, and drove their map routes in the end: 7 deadlocks.)"""
+    reached = [(c, since) for c, since in still if since <= now]
+    return _search(robot, planner, start, goal, speed, now, table, reached, progress, patient=True)
 
 
 def _length(points) -> float:
@@ -494,7 +519,9 @@ def searches(speed: float) -> list[tuple[float, float]]:
 
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
     """The goal, or the nearest free spot to it when a robot stands too close (one that stopped a little
-    short of its own spot, say): where this robot can stop clear of everyone."""
+    short of its own spot, say): where this robot can stop clear of everyone. `still` is what the search
+    keeps clear of (robots grown by the planning margins): a spot clear of the robots only, which a trip's
+    replans kept, could not be reached by the search (husky4 planned none for a minute, bench run C)."""
     discs = [plain.Disc(c.a[0], c.a[1], c.r, c.label) for c, _ in still]
     if plain.clear_of(tuple(goal), radius, discs, 0.05) is None:
         return tuple(goal)
@@ -774,12 +801,11 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     claim(robot, here, here, session.check)  # under traffic from now on: others wait for it, not go round it
     try:
         spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
-        for replans in range(MAX_REPLANS):
-            pose = session.pose()
+        for _ in range(MAX_REPLANS):
             learned = known_pace(robot.pk) if nav else None
             pace = _pace(limits, factor, nav, learned)
             speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
-            path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
+            path = _plan_patiently(session, spot, speed, around)
             spot = path[-1][:2]
             try:
                 _follow(session, path, limits, factor, nav, guessed=nav and learned is None)
@@ -797,6 +823,21 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         raise StepFailed(f"{robot.name}: not there after {MAX_REPLANS} plans")
     finally:
         release(robot, session.link.poses.value)
+
+
+def _plan_patiently(session: Session, goal, speed: float, around: set[int]) -> list[tuple]:
+    """A plan from where the robot stands: one that heeds the others' reservations, waiting PLAN_AGAIN_S where
+    it stands between tries while none does (the others move on meanwhile); after PLAN_TRIES, whatever plan
+    searches() finds. (A plan heeding only the room held now, or none, goes where others are about to be:
+    each of the 5 deadlocks of bench run A, 2026-11-24, was a Husky planned so meeting a robot on its plan.)"""
+    robot = session.robot
+    for _ in range(PLAN_TRIES - 1):
+        here = session.pose()[:2]
+        path = plan(robot, here, goal, speed, around, session.check, may_ask=True, patient=True)
+        if path is not None:
+            return path
+        _hold(session, time.time() + PLAN_AGAIN_S)
+    return plan(robot, session.pose()[:2], goal, speed, around, session.check, may_ask=True)
 
 
 def _back_off(session: Session, others: set[int], limits: motion.Limits, factor: float, nav: bool) -> None:
