@@ -9,7 +9,10 @@ The algorithms are plain (fleetcore.traffic); this module keeps their state in R
    replanned by it. Reservations are heeded WINDOW_S ahead (windowed cooperative A*), so a robot replans from
    where it is before its window runs out (_replan_now), against what the others reserved meanwhile. Plans
    are timed at the robot's real pace (its clock's rate; a nav stack's pace as seen), and a robot keeps to its
-   plan's times: it never sets off on a stretch well before the plan says.
+   plan's times: it never sets off on a stretch well before the plan says. A robot that finds no plan clear
+   of the reservations tries one past the goals others have yet to reach (_search_past_goals: they may close
+   its way for good), else waits where it stands and plans again (_plan_patiently); a plan heeding only the
+   room held now is the last resort (the claims keep it apart, but it meets robots on their plans head on).
 2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the room its footprint
    sweeps there. A claim is refused while another robot holds some of that room or stands in it; the robot
    then waits where it is and says for whom ("waiting for robot3"). Timing never has to be exact: a robot late
@@ -469,24 +472,27 @@ def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
 
 
 def until_passed(session: Session, request: dict, home) -> float:
-    """Wait, standing aside, until the robot made way for has passed `home` (its claim is clear of it and
-    none of its reserved cells near it lies ahead) or is done with its instruction; at most MAKE_WAY_WAIT_S.
-    Returns the seconds waited."""
+    """Wait, standing aside, until the robot made way for has passed `home` (it has a plan, none of whose
+    cells near `home` lies ahead, and its claim is clear of it; a robot waiting to plan again has not
+    passed) or is done with its instruction; at most MAKE_WAY_WAIT_S. Returns the seconds waited."""
     redis, other, started = coordination.connection(), request["for"], time.monotonic()
     near = reach(session.robot) + plain.TRAFFIC_CELL
     clear = request["r"] + reach(session.robot) + CLAIM_MARGIN
     session.link.halt()
     while time.monotonic() - started < MAKE_WAY_WAIT_S:
         plans, claims, now = _hash(redis, "plans"), _hash(redis, "claims"), time.time()
-        if other not in plans and other not in claims and other not in busy_ids():
-            break  # done (between two tries of a stalled trip it is out of the tables, not done: run w)
-        held = claims.get(other)
-        ahead = any(
-            t1 > now and math.dist(plain.center_of((col, row)), home) < near
-            for col, row, _, t1 in plans.get(other, {}).get("cells", ())
-        )
-        if not ahead and (held is None or plain.segment_distance(home, home, held["a"], held["b"]) > clear):
-            break
+        if other not in busy_ids():
+            break  # done with its instruction
+        if other in plans:  # (between two plans, or two tries of a stalled trip, it has not passed: run w)
+            held = claims.get(other)
+            ahead = any(
+                t1 > now and math.dist(plain.center_of((col, row)), home) < near
+                for col, row, _, t1 in plans[other]["cells"]
+            )
+            if not ahead and (
+                held is None or plain.segment_distance(home, home, held["a"], held["b"]) > clear
+            ):
+                break
         deadline = time.monotonic() + MAKE_WAY_POLL_S
         while time.monotonic() < deadline:
             session.check()
