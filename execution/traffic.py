@@ -473,8 +473,10 @@ def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
 
 def until_passed(session: Session, request: dict, home) -> float:
     """Wait, standing aside, until the robot made way for has passed `home` (it has a plan, none of whose
-    cells near `home` lies ahead, and its claim is clear of it; a robot waiting to plan again has not
-    passed) or is done with its instruction; at most MAKE_WAY_WAIT_S. Returns the seconds waited."""
+    cells near `home` lies ahead of where its claim starts, in the plan's order, and its claim is clear of
+    it; a robot waiting to plan again has not passed) or is done with its instruction; at most
+    MAKE_WAY_WAIT_S. Returns the seconds waited. (Judged by the clock, a robot held up by the claims had
+    "passed" as soon as its plan's times had: robots came back after 0 s in runs ad and ae.)"""
     redis, other, started = coordination.connection(), request["for"], time.monotonic()
     near = reach(session.robot) + plain.TRAFFIC_CELL
     clear = request["r"] + reach(session.robot) + CLAIM_MARGIN
@@ -484,10 +486,11 @@ def until_passed(session: Session, request: dict, home) -> float:
         if other not in busy_ids():
             break  # done with its instruction
         if other in plans:  # (between two plans, or two tries of a stalled trip, it has not passed: run w)
-            held = claims.get(other)
+            held, cells = claims.get(other), plans[other]["cells"]
+            at = _plan_time_at(cells, held["a"]) if held else None
+            at = now if at is None else at  # where the plan has it now (a robot late on it: run ae)
             ahead = any(
-                t1 > now and math.dist(plain.center_of((col, row)), home) < near
-                for col, row, _, t1 in plans[other]["cells"]
+                t0 > at and math.dist(plain.center_of((col, row)), home) < near for col, row, t0, _ in cells
             )
             if not ahead and (
                 held is None or plain.segment_distance(home, home, held["a"], held["b"]) > clear
@@ -498,6 +501,15 @@ def until_passed(session: Session, request: dict, home) -> float:
             session.check()
             session.pose()
     return time.monotonic() - started
+
+
+def _plan_time_at(cells, point) -> float | None:
+    """When a plan's reserved cells first have the robot at `point` (its cell or one next to it); None when
+    the plan does not pass there."""
+    times = [
+        t0 for col, row, t0, _ in cells if math.dist(plain.center_of((col, row)), point) < plain.TRAFFIC_CELL
+    ]
+    return min(times, default=None)
 
 
 def made_way(robot: Robot, failed: str = "") -> None:

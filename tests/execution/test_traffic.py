@@ -300,6 +300,30 @@ class StandingSession:
         pass
 
 
+def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_its_plan_has_passed(
+    robots, monkeypatch
+):
+    a, b = robots["a"], robots["b"]
+    monkeypatch.setattr(traffic, "MAKE_WAY_WAIT_S", 1.0)
+    monkeypatch.setattr(traffic, "MAKE_WAY_POLL_S", 0.05)
+    monkeypatch.setattr(traffic, "busy_ids", lambda: {a.pk})  # a is busy with its instruction
+    request = {"for": a.pk, "r": traffic.reach(a), "route": [[-4.0, -2.0], [4.0, -2.0]]}
+    aside, home = StandingSession(b, (0.0, -1.0, 0.0)), (0.0, -2.0)
+    assert traffic.until_passed(aside, request, home) >= 1.0  # a waits to plan again: not passed, b stays
+    cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": 0.0, "y": -1.0, "yaw": 0.0}, 60)
+    traffic.plan(a, (-2.0, -2.0), (2.0, -2.0), 0.3)  # a's plan passes b's home, where b stood
+    redis = traffic.coordination.connection()
+    entry = traffic._hash(redis, "plans")[a.pk]
+    late = [[c, r, t0 - 1000.0, t1 - 1000.0] for c, r, t0, t1 in entry["cells"]]
+    traffic._put(redis, "plans", a.pk, {**entry, "cells": late})  # a is held up: its plan's times are past
+    assert traffic.claim(a, (-2.0, -2.0), (-1.8, -2.0)) is None  # and it is still west of b's home
+    assert traffic.until_passed(aside, request, home) >= 1.0
+    traffic.release(a, None)
+    assert traffic.claim(a, (1.6, -2.0), (2.0, -2.0)) is None  # east of it, on the same plan: passed
+    traffic._put(redis, "plans", a.pk, {**entry, "cells": late})
+    assert traffic.until_passed(aside, request, home) < 0.5
+
+
 def test_a_stalled_robot_backs_off_only_into_room_it_has_claimed(robots):
     from execution.handlers import back_off
 
