@@ -9,10 +9,7 @@ The algorithms are plain (fleetcore.traffic); this module keeps their state in R
    replanned by it. Reservations are heeded WINDOW_S ahead (windowed cooperative A*), so a robot replans from
    where it is before its window runs out (_replan_now), against what the others reserved meanwhile. Plans
    are timed at the robot's real pace (its clock's rate; a nav stack's pace as seen), and a robot keeps to its
-   plan's times: it never sets off on a stretch well before the plan says. A robot that finds no plan clear
-   of the reservations tries one past the goals others have yet to reach (_search_past_goals: they may close
-   its way for good), else waits where it stands and plans again (_plan_patiently); a plan heeding only the
-   room held now is the last resort (the claims keep it apart, but it meets robots on their plans head on).
+   plan's times: it never sets off on a stretch well before the plan says.
 2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the room its footprint
    sweeps there. A claim is refused while another robot holds some of that room or stands in it; the robot
    then waits where it is and says for whom ("waiting for robot3"). Timing never has to be exact: a robot late
@@ -100,8 +97,6 @@ MAKE_WAY_WAIT_S = 120.0  # s a robot that made way waits for the other to pass b
 MAKE_WAY_POLL_S = 0.5
 ASIDE_STEP = 0.25  # m between the rings (and the points on them) searched for a spot off another's way
 ASIDE_SEARCH_M = 6.0  # m from where it stands a robot making way looks for that spot
-PLAN_AGAIN_S = 3.0  # s a robot that found no plan clear of the reservations waits before it plans again...
-PLAN_TRIES = 4  # ... at most this many times; then it plans heeding only the room held now (searches())
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
 
@@ -222,27 +217,22 @@ def plan(
     speed: float,
     around: set[int] = frozenset(),
     progress=None,
+    settled: bool = False,
     may_ask: bool = False,
-    patient: bool = False,
-) -> list[tuple] | None:
+) -> list[tuple]:
     """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t), in its
     turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan.
+    settled: the goal is the spot an earlier plan of this trip chose; it moves only if a robot would touch it.
     may_ask: robots parked in the way, idle, may be asked to make way (the plan then passes where they stand
-    once they have moved; ask_to_make_way sends them the instruction after the turn).
-    patient: None when no plan heeds the others' reservations (the robot waits and plans again: travel)."""
+    once they have moved; ask_to_make_way sends them the instruction after the turn)."""
     asked = time.monotonic()
     progress = _now_and_then(progress)
     with planning_turn(robot, progress):
         began = time.monotonic()
-        path = _plan(robot, start, goal, speed, around, progress, may_ask, patient)
+        path = _plan(robot, start, goal, speed, around, progress, settled, may_ask)
     done = time.monotonic()
     if may_ask:
         ask_to_make_way(robot)
-    if path is None:
-        log.info(
-            "traffic: %s has no plan clear of the others' reservations yet (%.2f s)", robot.name, done - began
-        )
-        return None
     log.info(
         "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
         robot.name,
@@ -294,13 +284,12 @@ def planning_turn(robot: Robot, progress=None):
 
 
 def _plan(
-    robot: Robot, start, goal, speed: float, around: set[int], progress, may_ask: bool, patient: bool,
-) -> list[tuple] | None:  # fmt: skip
+    robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool, may_ask: bool
+) -> list[tuple]:
     """The plan itself: read the table, search (searches(): less demanding each time one finds nothing),
     reserve. Without a map, or with no plan within the searches' bounds, the map route (or the straight line)
     is reserved as it is. A plan that finds no way past idle robots parked on the map route, or only a long
-    way round them (_detour), passes where they stand once they have made way, when they may be asked.
-    Patient, a plan that heeds the others' reservations or none (its old plan dropped: it is void)."""
+    way round them (_detour), passes where they stand once they have made way, when they may be asked."""
     planner = route.planner_for(robot)
     radius = reach(robot)
     now = time.time()
@@ -310,11 +299,9 @@ def _plan(
         table, still = obstacles(redis, robot.pk, now, around)  # a snapshot: no lock
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
         exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
-        goal = free_goal(robot, goal, radius, still, planner, start)
+        goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            path = _search(robot, planner, start, goal, speed, now, table, still, progress, patient)
-            if path is None and any(since > now for _, since in still):
-                path = _search_past_goals(robot, planner, start, goal, speed, now, table, still, progress)
+            path = _search(robot, planner, start, goal, speed, now, table, still, progress)
             through = _detour(path, start, goal, planner) if may_ask else None
             idle = _idle_in_the_way(redis, robot, through, exact) if through else {}
             if idle:  # the same search with them gone from where they stand after MAKE_WAY_HOLD_S
@@ -322,14 +309,11 @@ def _plan(
                     cells = plain.footprint_cells(disc.a, disc.r)
                     table.reserve(str(pk), cells, now - 1.0, now + MAKE_WAY_HOLD_S)
                 rest = [(c, since) for c, since in still if int(c.label) not in idle]
-                passing = _search(robot, planner, start, goal, speed, now, table, rest, progress, patient)
+                passing = _search(robot, planner, start, goal, speed, now, table, rest, progress)
                 asked = {pk: disc for pk, disc in idle.items() if passing and _passes(passing, disc, radius)}
                 if asked:  # (a plan that went round them all the same asks nobody)
                     path = passing
                     _request_way(redis, robot, asked, through)
-        if path is None and patient:
-            redis.hdel(_key("plans"), str(robot.pk))
-            return None
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
@@ -338,12 +322,10 @@ def _plan(
     return path
 
 
-def _search(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress, patient):
-    """The first plan of searches() that finds one (patient: of those that heed reservations), or None."""
+def _search(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress):
+    """The first plan of searches() that finds one, or None."""
     radius = reach(robot)
     for pace, window in searches(speed):
-        if patient and window < plain.WINDOW_S:
-            break
         search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now), window_s=window)
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
@@ -351,16 +333,6 @@ def _search(robot: Robot, planner, start, goal, speed: float, now: float, table,
                 log.info("traffic: %s heeds only the room held now on its way to %s", robot.name, goal)
             return path
     return None
-
-
-def _search_past_goals(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress):
-    """A plan heeding the reservations and the robots standing, not the goals others are yet to reach: one of
-    them may close the only way for good (a TurtleBot's in the cross aisle, 2 m wide, to a Husky). The robot
-    passes there when that one has arrived as it passes any robot standing: waiting for it while it is busy,
-    or asking it to make way. (Run B of 2026-11-24: Huskies and a TIAGo found no plan for a minute, waiting
-    and planning again, and drove their map routes in the end: 7 deadlocks.)"""
-    reached = [(c, since) for c, since in still if since <= now]
-    return _search(robot, planner, start, goal, speed, now, table, reached, progress, patient=True)
 
 
 def _length(points) -> float:
@@ -474,9 +446,10 @@ def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
 def until_passed(session: Session, request: dict, home) -> float:
     """Wait, standing aside, until the robot made way for has passed `home` (it has a plan, none of whose
     cells near `home` lies ahead of where its claim starts, in the plan's order, and its claim is clear of
-    it; a robot waiting to plan again has not passed) or is done with its instruction; at most
-    MAKE_WAY_WAIT_S. Returns the seconds waited. (Judged by the clock, a robot held up by the claims had
-    "passed" as soon as its plan's times had: robots came back after 0 s in runs ad and ae.)"""
+    it; a robot waiting to plan again has not passed), is done with its instruction or waits for this
+    one where it stands aside; at most MAKE_WAY_WAIT_S. Returns the seconds waited. (Judged by the clock, a
+    robot held up by the claims had "passed" as soon as its plan's times had: robots came back after 0 s
+    in runs ad and ae.)"""
     redis, other, started = coordination.connection(), request["for"], time.monotonic()
     near = reach(session.robot) + plain.TRAFFIC_CELL
     clear = request["r"] + reach(session.robot) + CLAIM_MARGIN
@@ -485,6 +458,8 @@ def until_passed(session: Session, request: dict, home) -> float:
         plans, claims, now = _hash(redis, "plans"), _hash(redis, "claims"), time.time()
         if other not in busy_ids():
             break  # done with its instruction
+        if _hash(redis, "waits").get(other, {}).get("for") == session.robot.pk:
+            break  # its way now goes through the spot aside (run af: each waited for the other for 120 s)
         if other in plans:  # (between two plans, or two tries of a stalled trip, it has not passed: run w)
             held, cells = claims.get(other), plans[other]["cells"]
             at = _plan_time_at(cells, held["a"]) if held else None
@@ -537,9 +512,7 @@ def searches(speed: float) -> list[tuple[float, float]]:
 
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
     """The goal, or the nearest free spot to it when a robot stands too close (one that stopped a little
-    short of its own spot, say): where this robot can stop clear of everyone. `still` is what the search
-    keeps clear of (robots grown by the planning margins): a spot clear of the robots only, which a trip's
-    replans kept, could not be reached by the search (husky4 planned none for a minute, bench run C)."""
+    short of its own spot, say): where this robot can stop clear of everyone."""
     discs = [plain.Disc(c.a[0], c.a[1], c.r, c.label) for c, _ in still]
     if plain.clear_of(tuple(goal), radius, discs, 0.05) is None:
         return tuple(goal)
@@ -819,11 +792,12 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     claim(robot, here, here, session.check)  # under traffic from now on: others wait for it, not go round it
     try:
         spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
-        for _ in range(MAX_REPLANS):
+        for replans in range(MAX_REPLANS):
+            pose = session.pose()
             learned = known_pace(robot.pk) if nav else None
             pace = _pace(limits, factor, nav, learned)
             speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
-            path = _plan_patiently(session, spot, speed, around)
+            path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
             spot = path[-1][:2]
             try:
                 _follow(session, path, limits, factor, nav, guessed=nav and learned is None)
@@ -841,21 +815,6 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
         raise StepFailed(f"{robot.name}: not there after {MAX_REPLANS} plans")
     finally:
         release(robot, session.link.poses.value)
-
-
-def _plan_patiently(session: Session, goal, speed: float, around: set[int]) -> list[tuple]:
-    """A plan from where the robot stands: one that heeds the others' reservations, waiting PLAN_AGAIN_S where
-    it stands between tries while none does (the others move on meanwhile); after PLAN_TRIES, whatever plan
-    searches() finds. (A plan heeding only the room held now, or none, goes where others are about to be:
-    each of the 5 deadlocks of bench run A, 2026-11-24, was a Husky planned so meeting a robot on its plan.)"""
-    robot = session.robot
-    for _ in range(PLAN_TRIES - 1):
-        here = session.pose()[:2]
-        path = plan(robot, here, goal, speed, around, session.check, may_ask=True, patient=True)
-        if path is not None:
-            return path
-        _hold(session, time.time() + PLAN_AGAIN_S)
-    return plan(robot, session.pose()[:2], goal, speed, around, session.check, may_ask=True)
 
 
 def _back_off(session: Session, others: set[int], limits: motion.Limits, factor: float, nav: bool) -> None:

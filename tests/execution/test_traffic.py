@@ -60,31 +60,6 @@ def test_a_plan_goes_around_the_path_reserved_before_it(robots):
     )  # it waited or went round: not faster than straight
 
 
-def test_a_patient_plan_finds_none_while_reservations_hem_the_robot_in_and_drops_its_void_plan(robots):
-    a, b = robots["a"], robots["b"]
-    redis = traffic.coordination.connection()
-    traffic.plan(b, (0.0, -2.0), (0.0, 2.0), 0.3)
-    now, start = time.time(), (0.0, -2.0)
-    ring = plain.footprint_cells(start, traffic.reach(b) + 0.6) - plain.footprint_cells(
-        start, traffic.reach(b)
-    )
-    cells = [[c, r, now - 1.0, now + 1000.0] for c, r in ring]  # a holds all round b, beyond any horizon
-    hem = {
-        "cells": cells,
-        "goal": [9.0, 9.0],
-        "r": 0.2,
-        "at": now + 1000.0,
-        "path": [],
-        "expires": now + 2000,
-    }
-    traffic._put(redis, "plans", a.pk, hem)
-    assert traffic.plan(b, start, (0.0, 2.0), 0.3, patient=True) is None  # it waits and plans again
-    assert b.pk not in traffic._hash(redis, "plans")  # its old plan is void: nobody keeps clear of it
-    impatient = traffic.plan(b, start, (0.0, 2.0), 0.3)  # after its last try: a plan all the same
-    assert impatient[0][:2] == start and impatient[-1][:2] == (0.0, 2.0)
-    assert b.pk in traffic._hash(redis, "plans")
-
-
 def test_a_wait_for_cycle_is_broken_by_the_robot_that_gave_way_least_then_the_highest_id(robots):
     a, b = robots["a"], robots["b"]
     redis = traffic.coordination.connection()
@@ -310,9 +285,12 @@ def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_it
     request = {"for": a.pk, "r": traffic.reach(a), "route": [[-4.0, -2.0], [4.0, -2.0]]}
     aside, home = StandingSession(b, (0.0, -1.0, 0.0)), (0.0, -2.0)
     assert traffic.until_passed(aside, request, home) >= 1.0  # a waits to plan again: not passed, b stays
+    redis = traffic.coordination.connection()
+    traffic._put(redis, "waits", a.pk, {"for": b.pk, "expires": 1e12})
+    assert traffic.until_passed(aside, request, home) < 0.5  # a waits for b where b stands aside: b goes back
+    redis.hdel(traffic._key("waits"), str(a.pk))
     cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": 0.0, "y": -1.0, "yaw": 0.0}, 60)
     traffic.plan(a, (-2.0, -2.0), (2.0, -2.0), 0.3)  # a's plan passes b's home, where b stood
-    redis = traffic.coordination.connection()
     entry = traffic._hash(redis, "plans")[a.pk]
     late = [[c, r, t0 - 1000.0, t1 - 1000.0] for c, r, t0, t1 in entry["cells"]]
     traffic._put(redis, "plans", a.pk, {**entry, "cells": late})  # a is held up: its plan's times are past
