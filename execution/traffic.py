@@ -205,6 +205,11 @@ def busy_ids() -> set[int]:
     return set(Execution.objects.filter(status__in=BUSY).values_list("robot_id", flat=True))
 
 
+def is_busy(robot_id: int) -> bool:
+    """Whether one robot is busy (busy_ids), asked of it alone."""
+    return Execution.objects.filter(robot_id=robot_id, status__in=BUSY).exists()
+
+
 def pad(t0: float):
     """Timing slack of a reservation made at t0: half a second, plus a tenth of the time ahead."""
     return lambda t: 0.5 + 0.1 * max(0.0, t - t0)
@@ -456,7 +461,7 @@ def until_passed(session: Session, request: dict, home) -> float:
     session.link.halt()
     while time.monotonic() - started < MAKE_WAY_WAIT_S:
         plans, claims, now = _hash(redis, "plans"), _hash(redis, "claims"), time.time()
-        if other not in busy_ids():
+        if not is_busy(other):
             break  # done with its instruction
         if _hash(redis, "waits").get(other, {}).get("for") == session.robot.pk:
             break  # its way now goes through the spot aside (run af: each waited for the other for 120 s)
@@ -721,7 +726,7 @@ def _parked(redis, blocker: int, waited: float) -> bool:
     request = _hash(redis, "makeway").get(blocker)
     if request is not None and request.get("sent") and not request.get("refused") and not request.get("done"):
         return False  # it was asked to make way (for this robot or another): it will
-    return blocker not in busy_ids() or waited > BUSY_WAIT_S
+    return not is_busy(blocker) or waited > BUSY_WAIT_S
 
 
 def _renew(redis, robot_id: int) -> None:

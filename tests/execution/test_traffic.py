@@ -281,7 +281,9 @@ def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_it
     a, b = robots["a"], robots["b"]
     monkeypatch.setattr(traffic, "MAKE_WAY_WAIT_S", 1.0)
     monkeypatch.setattr(traffic, "MAKE_WAY_POLL_S", 0.05)
-    monkeypatch.setattr(traffic, "busy_ids", lambda: {a.pk})  # a is busy with its instruction
+    monkeypatch.setattr(
+        traffic, "is_busy", lambda robot_id: robot_id == a.pk
+    )  # a is busy with its instruction
     request = {"for": a.pk, "r": traffic.reach(a), "route": [[-4.0, -2.0], [4.0, -2.0]]}
     aside, home = StandingSession(b, (0.0, -1.0, 0.0)), (0.0, -2.0)
     assert traffic.until_passed(aside, request, home) >= 1.0  # a waits to plan again: not passed, b stays
