@@ -67,12 +67,15 @@ def _planner(map_id: int, version: str, radius: float) -> Planner:
     return Planner(grid, radius)
 
 
-def planner_for(robot, row: Map | None = None) -> Planner | None:
-    """The planner for this robot's size on the fleet map (row: the map, when the caller has it); None: no map."""
+def planner_for(robot, row: Map | None = None, turning: bool = False) -> Planner | None:
+    """The planner for this robot's size on the fleet map (row: the map, when the caller has it); None: no map.
+    Its grid is inflated by half the robot's narrow side (the room it needs to pass a gap), or, turning, by half
+    its diagonal (the disc its corners sweep as it turns on the spot)."""
     row = row or fleet_map()
     if row is None:
         return None
-    return _planner(row.pk, row.created_at.isoformat(), round(footprint_radius(robot.footprint), 2))
+    radius = (reach_radius if turning else footprint_radius)(robot.footprint)
+    return _planner(row.pk, row.created_at.isoformat(), round(radius, 2))
 
 
 def path_length(start: tuple[float, float], path: list[tuple[float, float]]) -> float:

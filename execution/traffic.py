@@ -295,7 +295,7 @@ def _plan(
     reserve. Without a map, or with no plan within the searches' bounds, the map route (or the straight line)
     is reserved as it is. A plan that finds no way past idle robots parked on the map route, or only a long
     way round them (_detour), passes where they stand once they have made way, when they may be asked."""
-    planner = route.planner_for(robot)
+    planner = trip_planner(robot, start, goal)
     radius = reach(robot)
     now = time.time()
     path = None
@@ -325,6 +325,18 @@ def _plan(
         path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
     _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
     return path
+
+
+def trip_planner(robot: Robot, start, goal):
+    """The planner a trip is searched on: the one inflated by the disc the robot sweeps turning on the spot,
+    as it does where two legs of its route meet (planned by half its width, Huskies turning by a rack's
+    corner or a wall stalled against it: runs ah, ai), when start and goal lie in one region of its map; else
+    the one inflated by half its narrow side (a gap it can pass only straight, or a robot standing close to
+    a wall). None without a map."""
+    turning = route.planner_for(robot, turning=True)
+    if turning is None or turning.connected(tuple(start[:2]), tuple(goal[:2])):
+        return turning
+    return route.planner_for(robot)
 
 
 def _search(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress):
@@ -430,7 +442,7 @@ def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
     """The free spot nearest to `here` where the robot stands clear of the route it makes way for (by both
     robots' reach and the planning margins) and of the robots standing and the goals reserved; None when
     there is none within ASIDE_SEARCH_M."""
-    planner = route.planner_for(robot)
+    planner = route.planner_for(robot, turning=True)  # it turns there, to come back
     radius, route_points = reach(robot), [tuple(p) for p in request["route"]]
     clear = request["r"] + radius + CLAIM_MARGIN + PLAN_MARGIN
     legs = list(itertools.pairwise(route_points)) or [(route_points[0], route_points[0])]
