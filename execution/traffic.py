@@ -71,9 +71,10 @@ TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together
 TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
 TURN_POLL_S = 0.05
 PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
-MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
-REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned when nobody else plans...
-REPLAN_LAST_S = plain.WINDOW_S * 0.8  # s ... and before it is replanned in any case (_replan_now)
+MAX_REPLANS = 80  # plans of one trip, its window run out each time (at least 4 s apart, 15 s at full window)
+SHORT_WINDOW_S = 8.0  # s ahead a plan heeds the reservations when none heeding WINDOW_S is found (searches())
+REPLAN_AT = 0.5  # of its window a plan is followed before it is replanned when nobody else plans...
+REPLAN_LAST_AT = 0.8  # ... and before it is replanned in any case (_replan_now)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
@@ -98,6 +99,15 @@ MAKE_WAY_POLL_S = 0.5
 ASIDE_STEP = 0.25  # m between the rings (and the points on them) searched for a spot off another's way
 ASIDE_SEARCH_M = 6.0  # m from where it stands a robot making way looks for that spot
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
+
+
+class TimedPath(list):
+    """A robot's timed path [(x, y, t), ...], and how many seconds ahead it heeded the others' reservations
+    (its window: WINDOW_S, less when no plan heeding them so far was found, 0 for the room held now only)."""
+
+    def __init__(self, points, window: float) -> None:
+        super().__init__(points)
+        self.window = window
 
 
 class Replan(Exception):
@@ -322,7 +332,9 @@ def _plan(
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
-        path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
+        path = TimedPath(
+            _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now), 0.0
+        )
     _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
     return path
 
@@ -347,8 +359,14 @@ def _search(robot: Robot, planner, start, goal, speed: float, now: float, table,
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
             if window < plain.WINDOW_S:
-                log.info("traffic: %s heeds only the room held now on its way to %s", robot.name, goal)
-            return path
+                log.info(
+                    "traffic: %s heeds the reservations only %.0f s ahead to %s", robot.name, window, goal
+                )
+            return TimedPath(path, window)
+        log.info(
+            "traffic: %s found no plan to %s heeding %.0f s ahead at %.2f m/s (%d states)",
+            robot.name, goal, window, pace, search.expanded,
+        )  # fmt: skip
     return None
 
 
@@ -519,12 +537,14 @@ def made_way(robot: Robot, failed: str = "") -> None:
 def searches(speed: float) -> list[tuple[float, float]]:
     """(pace, window) of the searches tried in turn until one finds a plan: the robot's pace; a fast robot's
     again at SLOW_PLAN_MPS (a grid search pays for each wait in ticks of one cell's travel: the faster the
-    robot, the more of them); then heeding only the room others hold now and the robots standing (a way round
-    robots parked in the way, which the claims keep apart from the others, replanned as it goes)."""
+    robot, the more of them); then heeding the reservations only SHORT_WINDOW_S ahead (it will not meet head
+    on a robot keeping to its plan there: in run aj, 5 of the 7 deadlocks were Huskies on plans heeding only
+    the room held now); then only the room others hold now and the robots standing (a way round robots
+    parked in the way, which the claims keep apart from the others). Each is replanned soon (_replan_now)."""
     out = [(speed, plain.WINDOW_S)]
     if speed > SLOW_PLAN_MPS * 1.2:
         out.append((SLOW_PLAN_MPS, plain.WINDOW_S))
-    return [*out, (speed, 0.0)]
+    return [*out, (speed, SHORT_WINDOW_S), (speed, 0.0)]
 
 
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
@@ -909,10 +929,11 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
-    windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
+    window = path.window
+    windowed = path[-1][2] - planned > window  # it heeded others only so far: replan before the end
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
-        if i and windowed and _replan_now(time.time() - planned):
+        if i and windowed and _replan_now(time.time() - planned, window):
             raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
         early = time.time() < due - EARLY_S
@@ -966,13 +987,15 @@ def _pace(limits: motion.Limits, factor: float, nav: bool, learned: float | None
     return learned or limits.linear
 
 
-def _replan_now(age: float) -> bool:
-    """Whether a windowed plan this old is replanned at this stretch: from REPLAN_S on, when nobody is planning
-    (a replan waits for its turn with the robot standing: in a crowd that was most of the turns' waiting), and
-    in any case once its window has little left (REPLAN_LAST_S)."""
-    if age <= REPLAN_S:
+def _replan_now(age: float, window: float = plain.WINDOW_S) -> bool:
+    """Whether a plan this old, which heeded the reservations `window` s ahead, is replanned at this stretch:
+    from REPLAN_AT of its window on, when nobody is planning (a replan waits for its turn with the robot
+    standing: in a crowd that was most of the turns' waiting), and in any case once its window has little left
+    (REPLAN_LAST_AT). A plan that heeded only the room held now is replanned as one of SHORT_WINDOW_S."""
+    window = max(window, SHORT_WINDOW_S)
+    if age <= window * REPLAN_AT:
         return False
-    return age > REPLAN_LAST_S or not coordination.connection().exists(_key("turn"))
+    return age > window * REPLAN_LAST_AT or not coordination.connection().exists(_key("turn"))
 
 
 def _tolerance(here, legs, i: int) -> float:

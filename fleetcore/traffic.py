@@ -386,6 +386,7 @@ class SpaceTimeSearch:
     max_expansions: int = 60_000
     horizon_s: float = 240.0
     window_s: float = WINDOW_S
+    expanded: int = field(default=0, init=False)  # states the last plan() expanded
 
     def plan(
         self,
@@ -428,7 +429,9 @@ class SpaceTimeSearch:
         squeezed = near.gap(s, t0) < 0  # it starts nearer to a robot standing than it should come
         counter = itertools.count()
         start_state = (s, 0)
-        openq = [(distance[s] * tick, next(counter), start_state, t0)]
+        # Queued by f in ticks (rounded: sums of float times tie only so), then nearest to the goal first: of the
+        # many states as good as each other (a wait here or there), the one furthest on is expanded first.
+        openq = [(round(distance[s], 6), distance[s], next(counter), start_state, t0)]
         parent: dict = {start_state: None}
         times = {start_state: t0}
         for expansions in range(self.max_expansions):
@@ -436,8 +439,9 @@ class SpaceTimeSearch:
                 break
             if expansions % 500 == 499:
                 self._progress()
-            _, _, state, t = heapq.heappop(openq)
+            *_, state, t = heapq.heappop(openq)
             c = state[0]
+            self.expanded = expansions + 1
             if c == g and not held(c).overlaps(t - self.pad(t), FOREVER) and near.stays(c, t):
                 return self._timed(state, parent, times, start, goal, near_term, robot)
             if t - t0 > self.horizon_s:
@@ -459,7 +463,8 @@ class SpaceTimeSearch:
                 if not near.may_move(c, n, t1, loose=squeezed and own):
                     continue
                 parent[nxt], times[nxt] = state, t1
-                heapq.heappush(openq, (t1 - t0 + distance[n] * tick, next(counter), nxt, t1))
+                f = round((t1 - t0) / tick + distance[n], 6)
+                heapq.heappush(openq, (f, distance[n], next(counter), nxt, t1))
         return None
 
     def _distances(self, goal: Cell, start: Cell) -> dict[Cell, float]:

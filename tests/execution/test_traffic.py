@@ -219,15 +219,21 @@ def test_a_trip_is_planned_with_room_to_turn_where_it_fits_else_with_room_to_pas
 def test_a_windowed_plan_is_replanned_when_nobody_plans_and_before_its_window_runs_out(exec_settings):
     redis, turn = traffic.coordination.connection(), traffic._key("turn")
     redis.delete(turn)
-    assert not traffic._replan_now(traffic.REPLAN_S - 1)  # young: followed as it is
-    assert traffic._replan_now(traffic.REPLAN_S + 1)  # due, and the turn is free
+    full, short = plain.WINDOW_S, traffic.SHORT_WINDOW_S
+    assert not traffic._replan_now(full * traffic.REPLAN_AT - 1, full)  # young: followed as it is
+    assert traffic._replan_now(full * traffic.REPLAN_AT + 1, full)  # due, and the turn is free
+    assert traffic._replan_now(short * traffic.REPLAN_AT + 0.1, short)  # a short window's plan: sooner
+    assert traffic._replan_now(short * traffic.REPLAN_AT + 0.1, 0.0)  # one blind to the reservations: as soon
     redis.set(turn, "another robot plans", px=5_000)
     try:
-        assert not traffic._replan_now(traffic.REPLAN_S + 1)  # it drives on rather than stand in the queue
-        assert traffic._replan_now(traffic.REPLAN_LAST_S + 1)  # its window is nearly out: it waits its turn
+        # it drives on rather than stand in the queue, until its window is nearly out
+        assert not traffic._replan_now(full * traffic.REPLAN_AT + 1, full)
+        assert traffic._replan_now(full * traffic.REPLAN_LAST_AT + 1, full)
+        assert traffic._replan_now(short * traffic.REPLAN_LAST_AT + 0.1, 0.0)
     finally:
         redis.delete(turn)
-    assert traffic.REPLAN_LAST_S < plain.WINDOW_S
+    assert traffic.REPLAN_AT < traffic.REPLAN_LAST_AT < 1.0
+    assert [window for _, window in traffic.searches(0.3)] == [full, short, 0.0]  # less far ahead each time
 
 
 def test_a_robot_making_way_stands_clear_of_the_route_it_makes_way_for_as_near_as_it_can(robots):
