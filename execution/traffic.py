@@ -70,11 +70,12 @@ BACK_OFF_M = 0.4  # m a robot breaking a deadlock drives away from the others fi
 TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together are planned one by one)
 TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
 TURN_POLL_S = 0.05
+TURN_HEAD_START_S = 60.0  # s at most a robot is put ahead in the line to plan for the length of its trip
+TURN_ALIVE_MS = 1_000  # a robot in the line that has not asked for its turn for this long has left it
 PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
-MAX_REPLANS = 80  # plans of one trip, its window run out each time (at least 4 s apart, 15 s at full window)
-SHORT_WINDOW_S = 8.0  # s ahead a plan heeds the reservations when none heeding WINDOW_S is found (searches())
-REPLAN_AT = 0.5  # of its window a plan is followed before it is replanned when nobody else plans...
-REPLAN_LAST_AT = 0.8  # ... and before it is replanned in any case (_replan_now)
+MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
+REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned when nobody else plans...
+REPLAN_LAST_S = plain.WINDOW_S * 0.8  # s ... and before it is replanned in any case (_replan_now)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
@@ -99,15 +100,6 @@ MAKE_WAY_POLL_S = 0.5
 ASIDE_STEP = 0.25  # m between the rings (and the points on them) searched for a spot off another's way
 ASIDE_SEARCH_M = 6.0  # m from where it stands a robot making way looks for that spot
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
-
-
-class TimedPath(list):
-    """A robot's timed path [(x, y, t), ...], and how many seconds ahead it heeded the others' reservations
-    (its window: WINDOW_S, less when no plan heeding them so far was found, 0 for the room held now only)."""
-
-    def __init__(self, points, window: float) -> None:
-        super().__init__(points)
-        self.window = window
 
 
 class Replan(Exception):
@@ -242,7 +234,7 @@ def plan(
     once they have moved; ask_to_make_way sends them the instruction after the turn)."""
     asked = time.monotonic()
     progress = _now_and_then(progress)
-    with planning_turn(robot, progress):
+    with planning_turn(robot, progress, math.dist(start[:2], goal[:2]) / max(speed, 0.01)):
         began = time.monotonic()
         path = _plan(robot, start, goal, speed, around, progress, settled, may_ask)
     done = time.monotonic()
@@ -275,22 +267,58 @@ def _now_and_then(progress):
     return call
 
 
+# Take the turn to plan (KEYS[1]) if it is free and this waiter (ARGV[2]) is the first in the line (KEYS[2]:
+# a sorted set by place, ARGV[3]) of those still asking (KEYS[3]: when each last asked, ms): one who stopped
+# asking for TURN_ALIVE_MS (ARGV[5]; a dead worker) leaves the line. Returns 1 when taken.
+TAKE_TURN = """
+local clock = redis.call('TIME')
+local now = tonumber(clock[1]) * 1000 + math.floor(tonumber(clock[2]) / 1000)
+redis.call('ZADD', KEYS[2], 'NX', ARGV[3], ARGV[2])
+redis.call('HSET', KEYS[3], ARGV[2], now)
+if redis.call('EXISTS', KEYS[1]) == 1 then return 0 end
+for _, waiter in ipairs(redis.call('ZRANGE', KEYS[2], 0, -1)) do
+  if waiter == ARGV[2] then
+    redis.call('SET', KEYS[1], ARGV[1], 'PX', ARGV[4])
+    redis.call('ZREM', KEYS[2], waiter)
+    redis.call('HDEL', KEYS[3], waiter)
+    return 1
+  end
+  if now - tonumber(redis.call('HGET', KEYS[3], waiter) or '0') < tonumber(ARGV[5]) then return 0 end
+  redis.call('ZREM', KEYS[2], waiter)
+  redis.call('HDEL', KEYS[3], waiter)
+end
+return 0
+"""
+
+
 @contextlib.contextmanager
-def planning_turn(robot: Robot, progress=None):
+def planning_turn(robot: Robot, progress=None, trip_s: float = 0.0):
     """One plan at a time across the fleet (prioritized planning: robots sent together are planned in turn,
-    each against the paths reserved before it, instead of all against the same snapshot). A turn that does not
-    come within TURN_WAIT_S is not waited for (the claims still keep robots apart); a planner that dies lets
-    its turn lapse after TURN_TTL_MS."""
+    each against the paths reserved before it, instead of all against the same snapshot). Robots wait in a
+    line by the time they asked, the longer trips (trip_s, s) put ahead by up to TURN_HEAD_START_S: the
+    longest trip is planned first and none is held back for ever (robots sent together left in random order,
+    and the longest trip, planned last, came in last by up to 30 s). A turn that does not come within
+    TURN_WAIT_S is not waited for (the claims still keep robots apart); a planner that dies lets its turn lapse
+    after TURN_TTL_MS, and its place in the line after TURN_ALIVE_MS."""
     redis, token = coordination.connection(), coordination.new_token()
+    keys = (_key("turn"), _key("line"), _key("asking"))
+    place = time.time() - min(trip_s, TURN_HEAD_START_S)
     deadline = time.monotonic() + TURN_WAIT_S
     held = False
-    while not (held := bool(redis.set(_key("turn"), token, nx=True, px=TURN_TTL_MS))):
-        if time.monotonic() > deadline:
-            log.info("traffic: %s plans without waiting longer for its turn", robot.name)
-            break
-        if progress is not None:
-            progress()
-        time.sleep(TURN_POLL_S)
+    try:
+        while not (
+            held := bool(redis.eval(TAKE_TURN, 3, *keys, token, token, place, TURN_TTL_MS, TURN_ALIVE_MS))
+        ):
+            if time.monotonic() > deadline:
+                log.info("traffic: %s plans without waiting longer for its turn", robot.name)
+                break
+            if progress is not None:
+                progress()
+            time.sleep(TURN_POLL_S)
+    finally:
+        if not held:  # out of the line (the turn taken leaves it)
+            redis.zrem(keys[1], token)
+            redis.hdel(keys[2], token)
     try:
         yield
     finally:
@@ -332,9 +360,7 @@ def _plan(
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
-        path = TimedPath(
-            _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now), 0.0
-        )
+        path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
     _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
     return path
 
@@ -359,10 +385,8 @@ def _search(robot: Robot, planner, start, goal, speed: float, now: float, table,
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
             if window < plain.WINDOW_S:
-                log.info(
-                    "traffic: %s heeds the reservations only %.0f s ahead to %s", robot.name, window, goal
-                )
-            return TimedPath(path, window)
+                log.info("traffic: %s heeds only the room held now on its way to %s", robot.name, goal)
+            return path
         log.info(
             "traffic: %s found no plan to %s heeding %.0f s ahead at %.2f m/s (%d states)",
             robot.name, goal, window, pace, search.expanded,
@@ -537,14 +561,15 @@ def made_way(robot: Robot, failed: str = "") -> None:
 def searches(speed: float) -> list[tuple[float, float]]:
     """(pace, window) of the searches tried in turn until one finds a plan: the robot's pace; a fast robot's
     again at SLOW_PLAN_MPS (a grid search pays for each wait in ticks of one cell's travel: the faster the
-    robot, the more of them); then heeding the reservations only SHORT_WINDOW_S ahead (it will not meet head
-    on a robot keeping to its plan there: in run aj, 5 of the 7 deadlocks were Huskies on plans heeding only
-    the room held now); then only the room others hold now and the robots standing (a way round robots
-    parked in the way, which the claims keep apart from the others). Each is replanned soon (_replan_now)."""
+    robot, the more of them); then heeding only the room others hold now and the robots standing (a way round
+    robots parked in the way, which the claims keep apart from the others, replanned as it goes). (A search
+    heeding them 8 s ahead between, and such plans replanned every 4 s, was tried in run al: where robots
+    standing left no way, each replan was four failed searches in the turn, the fleet waited 1,400 s for
+    turns against 220 s in run ak, and had 7 deadlocks and 2.94x the longest lone run against 2 and 1.55x.)"""
     out = [(speed, plain.WINDOW_S)]
     if speed > SLOW_PLAN_MPS * 1.2:
         out.append((SLOW_PLAN_MPS, plain.WINDOW_S))
-    return [*out, (speed, SHORT_WINDOW_S), (speed, 0.0)]
+    return [*out, (speed, 0.0)]
 
 
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
@@ -929,11 +954,10 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
-    window = path.window
-    windowed = path[-1][2] - planned > window  # it heeded others only so far: replan before the end
+    windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
-        if i and windowed and _replan_now(time.time() - planned, window):
+        if i and windowed and _replan_now(time.time() - planned):
             raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
         early = time.time() < due - EARLY_S
@@ -987,15 +1011,13 @@ def _pace(limits: motion.Limits, factor: float, nav: bool, learned: float | None
     return learned or limits.linear
 
 
-def _replan_now(age: float, window: float = plain.WINDOW_S) -> bool:
-    """Whether a plan this old, which heeded the reservations `window` s ahead, is replanned at this stretch:
-    from REPLAN_AT of its window on, when nobody is planning (a replan waits for its turn with the robot
-    standing: in a crowd that was most of the turns' waiting), and in any case once its window has little left
-    (REPLAN_LAST_AT). A plan that heeded only the room held now is replanned as one of SHORT_WINDOW_S."""
-    window = max(window, SHORT_WINDOW_S)
-    if age <= window * REPLAN_AT:
+def _replan_now(age: float) -> bool:
+    """Whether a windowed plan this old is replanned at this stretch: from REPLAN_S on, when nobody is planning
+    (a replan waits for its turn with the robot standing: in a crowd that was most of the turns' waiting), and
+    in any case once its window has little left (REPLAN_LAST_S)."""
+    if age <= REPLAN_S:
         return False
-    return age > window * REPLAN_LAST_AT or not coordination.connection().exists(_key("turn"))
+    return age > REPLAN_LAST_S or not coordination.connection().exists(_key("turn"))
 
 
 def _tolerance(here, legs, i: int) -> float:

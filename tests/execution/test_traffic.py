@@ -2,6 +2,7 @@
 
 import itertools
 import math
+import threading
 import time
 import types
 
@@ -216,24 +217,44 @@ def test_a_trip_is_planned_with_room_to_turn_where_it_fits_else_with_room_to_pas
     assert corners and all(turning.free(*turning.to_cell(*p)) for p in corners), corners
 
 
+def test_the_turn_to_plan_goes_to_the_longest_trip_first_and_past_a_waiter_that_left(robots):
+    redis, turn = traffic.coordination.connection(), traffic._key("turn")
+    redis.set(turn, "another robot plans", px=5_000)
+    order = []
+
+    def wait_turn(robot, trip_s: float) -> None:
+        with traffic.planning_turn(robot, trip_s=trip_s):
+            order.append(robot.name)  # one at a time: each holds the turn
+
+    # one that asked first and then stopped asking (its worker died): it keeps nobody waiting for long
+    redis.eval(traffic.TAKE_TURN, 3, turn, traffic._key("line"), traffic._key("asking"),
+               "dead", "dead", 0.0, traffic.TURN_TTL_MS, traffic.TURN_ALIVE_MS)  # fmt: skip
+    waiters = [
+        threading.Thread(target=wait_turn, args=(robots["a"], 5.0)),
+        threading.Thread(target=wait_turn, args=(robots["b"], 50.0)),
+    ]
+    for waiter in waiters:
+        waiter.start()
+    time.sleep(0.3)  # both in the line
+    redis.delete(turn)
+    for waiter in waiters:
+        waiter.join(timeout=10)
+    assert order == ["b", "a"]  # b's trip is the longer: it plans first, though a asked first
+    assert not redis.zrange(traffic._key("line"), 0, -1)  # nobody left in the line, the dead one gone too
+
+
 def test_a_windowed_plan_is_replanned_when_nobody_plans_and_before_its_window_runs_out(exec_settings):
     redis, turn = traffic.coordination.connection(), traffic._key("turn")
     redis.delete(turn)
-    full, short = plain.WINDOW_S, traffic.SHORT_WINDOW_S
-    assert not traffic._replan_now(full * traffic.REPLAN_AT - 1, full)  # young: followed as it is
-    assert traffic._replan_now(full * traffic.REPLAN_AT + 1, full)  # due, and the turn is free
-    assert traffic._replan_now(short * traffic.REPLAN_AT + 0.1, short)  # a short window's plan: sooner
-    assert traffic._replan_now(short * traffic.REPLAN_AT + 0.1, 0.0)  # one blind to the reservations: as soon
+    assert not traffic._replan_now(traffic.REPLAN_S - 1)  # young: followed as it is
+    assert traffic._replan_now(traffic.REPLAN_S + 1)  # due, and the turn is free
     redis.set(turn, "another robot plans", px=5_000)
     try:
-        # it drives on rather than stand in the queue, until its window is nearly out
-        assert not traffic._replan_now(full * traffic.REPLAN_AT + 1, full)
-        assert traffic._replan_now(full * traffic.REPLAN_LAST_AT + 1, full)
-        assert traffic._replan_now(short * traffic.REPLAN_LAST_AT + 0.1, 0.0)
+        assert not traffic._replan_now(traffic.REPLAN_S + 1)  # it drives on rather than stand in the queue
+        assert traffic._replan_now(traffic.REPLAN_LAST_S + 1)  # its window is nearly out: it waits its turn
     finally:
         redis.delete(turn)
-    assert traffic.REPLAN_AT < traffic.REPLAN_LAST_AT < 1.0
-    assert [window for _, window in traffic.searches(0.3)] == [full, short, 0.0]  # less far ahead each time
+    assert traffic.REPLAN_LAST_S < plain.WINDOW_S
 
 
 def test_a_robot_making_way_stands_clear_of_the_route_it_makes_way_for_as_near_as_it_can(robots):
