@@ -170,3 +170,14 @@ def test_wait_cycles_are_found_and_chains_are_not():
 def test_cells_cover_the_footprint():
     cells = traffic.footprint_cells((0.1, 0.1), 0.25)
     assert cell_of((0.1, 0.1)) in cells and cell_of((0.33, 0.1)) in cells and cell_of((0.6, 0.1)) not in cells
+
+
+def test_a_goal_robots_standing_wall_off_fails_at_once_and_one_they_will_only_later_does_not():
+    wall = [(Capsule((0.2, y), (0.2, y), 0.3, f"parked{i}"), -math.inf) for i, y in enumerate((-2.4, -1.8, -1.2,
+            -0.6, 0.0, 0.6, 1.2, 1.8, 2.4))]  # fmt: skip
+    walled = search()
+    assert walled.plan((-2.0, 0.1), (2.0, 0.1), 0.0, ReservationTable(), "a", wall) is None
+    assert walled.expanded == 0  # not a state spent on waiting for a way that never opens
+    later = [(capsule, 30.0) for capsule, _ in wall]  # they will stand there from t = 30: it passes before
+    path = search().plan((-2.0, 0.1), (2.0, 0.1), 0.0, ReservationTable(), "a", later)
+    assert path is not None and path[-1][:2] == (2.0, 0.1) and path[-1][2] < 30.0
