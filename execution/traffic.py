@@ -70,8 +70,6 @@ BACK_OFF_M = 0.4  # m a robot breaking a deadlock drives away from the others fi
 TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together are planned one by one)
 TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
 TURN_POLL_S = 0.05
-TURN_HEAD_START_S = 60.0  # s at most a robot is put ahead in the line to plan for the length of its trip
-TURN_ALIVE_MS = 1_000  # a robot in the line that has not asked for its turn for this long has left it
 PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
 MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
 REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned when nobody else plans...
@@ -234,7 +232,7 @@ def plan(
     once they have moved; ask_to_make_way sends them the instruction after the turn)."""
     asked = time.monotonic()
     progress = _now_and_then(progress)
-    with planning_turn(robot, progress, math.dist(start[:2], goal[:2]) / max(speed, 0.01)):
+    with planning_turn(robot, progress):
         began = time.monotonic()
         path = _plan(robot, start, goal, speed, around, progress, settled, may_ask)
     done = time.monotonic()
@@ -267,58 +265,22 @@ def _now_and_then(progress):
     return call
 
 
-# Take the turn to plan (KEYS[1]) if it is free and this waiter (ARGV[2]) is the first in the line (KEYS[2]:
-# a sorted set by place, ARGV[3]) of those still asking (KEYS[3]: when each last asked, ms): one who stopped
-# asking for TURN_ALIVE_MS (ARGV[5]; a dead worker) leaves the line. Returns 1 when taken.
-TAKE_TURN = """
-local clock = redis.call('TIME')
-local now = tonumber(clock[1]) * 1000 + math.floor(tonumber(clock[2]) / 1000)
-redis.call('ZADD', KEYS[2], 'NX', ARGV[3], ARGV[2])
-redis.call('HSET', KEYS[3], ARGV[2], now)
-if redis.call('EXISTS', KEYS[1]) == 1 then return 0 end
-for _, waiter in ipairs(redis.call('ZRANGE', KEYS[2], 0, -1)) do
-  if waiter == ARGV[2] then
-    redis.call('SET', KEYS[1], ARGV[1], 'PX', ARGV[4])
-    redis.call('ZREM', KEYS[2], waiter)
-    redis.call('HDEL', KEYS[3], waiter)
-    return 1
-  end
-  if now - tonumber(redis.call('HGET', KEYS[3], waiter) or '0') < tonumber(ARGV[5]) then return 0 end
-  redis.call('ZREM', KEYS[2], waiter)
-  redis.call('HDEL', KEYS[3], waiter)
-end
-return 0
-"""
-
-
 @contextlib.contextmanager
-def planning_turn(robot: Robot, progress=None, trip_s: float = 0.0):
+def planning_turn(robot: Robot, progress=None):
     """One plan at a time across the fleet (prioritized planning: robots sent together are planned in turn,
-    each against the paths reserved before it, instead of all against the same snapshot). Robots wait in a
-    line by the time they asked, the longer trips (trip_s, s) put ahead by up to TURN_HEAD_START_S: the
-    longest trip is planned first and none is held back for ever (robots sent together left in random order,
-    and the longest trip, planned last, came in last by up to 30 s). A turn that does not come within
-    TURN_WAIT_S is not waited for (the claims still keep robots apart); a planner that dies lets its turn lapse
-    after TURN_TTL_MS, and its place in the line after TURN_ALIVE_MS."""
+    each against the paths reserved before it, instead of all against the same snapshot). A turn that does not
+    come within TURN_WAIT_S is not waited for (the claims still keep robots apart); a planner that dies lets
+    its turn lapse after TURN_TTL_MS."""
     redis, token = coordination.connection(), coordination.new_token()
-    keys = (_key("turn"), _key("line"), _key("asking"))
-    place = time.time() - min(trip_s, TURN_HEAD_START_S)
     deadline = time.monotonic() + TURN_WAIT_S
     held = False
-    try:
-        while not (
-            held := bool(redis.eval(TAKE_TURN, 3, *keys, token, token, place, TURN_TTL_MS, TURN_ALIVE_MS))
-        ):
-            if time.monotonic() > deadline:
-                log.info("traffic: %s plans without waiting longer for its turn", robot.name)
-                break
-            if progress is not None:
-                progress()
-            time.sleep(TURN_POLL_S)
-    finally:
-        if not held:  # out of the line (the turn taken leaves it)
-            redis.zrem(keys[1], token)
-            redis.hdel(keys[2], token)
+    while not (held := bool(redis.set(_key("turn"), token, nx=True, px=TURN_TTL_MS))):
+        if time.monotonic() > deadline:
+            log.info("traffic: %s plans without waiting longer for its turn", robot.name)
+            break
+        if progress is not None:
+            progress()
+        time.sleep(TURN_POLL_S)
     try:
         yield
     finally:

@@ -2,7 +2,6 @@
 
 import itertools
 import math
-import threading
 import time
 import types
 
@@ -215,32 +214,6 @@ def test_a_trip_is_planned_with_room_to_turn_where_it_fits_else_with_room_to_pas
     assert path[-1][:2] == (14.0, 14.0)
     corners = [p[:2] for p in path[1:-1]]  # where it turns on the spot
     assert corners and all(turning.free(*turning.to_cell(*p)) for p in corners), corners
-
-
-def test_the_turn_to_plan_goes_to_the_longest_trip_first_and_past_a_waiter_that_left(robots):
-    redis, turn = traffic.coordination.connection(), traffic._key("turn")
-    redis.set(turn, "another robot plans", px=5_000)
-    order = []
-
-    def wait_turn(robot, trip_s: float) -> None:
-        with traffic.planning_turn(robot, trip_s=trip_s):
-            order.append(robot.name)  # one at a time: each holds the turn
-
-    # one that asked first and then stopped asking (its worker died): it keeps nobody waiting for long
-    redis.eval(traffic.TAKE_TURN, 3, turn, traffic._key("line"), traffic._key("asking"),
-               "dead", "dead", 0.0, traffic.TURN_TTL_MS, traffic.TURN_ALIVE_MS)  # fmt: skip
-    waiters = [
-        threading.Thread(target=wait_turn, args=(robots["a"], 5.0)),
-        threading.Thread(target=wait_turn, args=(robots["b"], 50.0)),
-    ]
-    for waiter in waiters:
-        waiter.start()
-    time.sleep(0.3)  # both in the line
-    redis.delete(turn)
-    for waiter in waiters:
-        waiter.join(timeout=10)
-    assert order == ["b", "a"]  # b's trip is the longer: it plans first, though a asked first
-    assert not redis.zrange(traffic._key("line"), 0, -1)  # nobody left in the line, the dead one gone too
 
 
 def test_a_windowed_plan_is_replanned_when_nobody_plans_and_before_its_window_runs_out(exec_settings):
