@@ -431,9 +431,10 @@ class SpaceTimeSearch:
             return None
         counter = itertools.count()
         start_state = (s, 0)
-        # Queued by f in ticks (rounded: sums of float times tie only so), then nearest to the goal first: of the
-        # many states as good as each other (a wait here or there), the one furthest on is expanded first.
-        openq = [(round(distance[s], 6), distance[s], next(counter), start_state, t0)]
+        # Of states as good as each other, the one queued first is expanded first. (Nearest the goal first
+        # expanded 10-40% fewer states, and found plans that wait near where robots meet rather than where the
+        # robot stands: runs an and ao had 6 and 7 deadlocks, against 2 in run ak without it.)
+        openq = [(distance[s] * tick, next(counter), start_state, t0)]
         parent: dict = {start_state: None}
         times = {start_state: t0}
         for expansions in range(self.max_expansions):
@@ -441,7 +442,7 @@ class SpaceTimeSearch:
                 break
             if expansions % 500 == 499:
                 self._progress()
-            *_, state, t = heapq.heappop(openq)
+            _, _, state, t = heapq.heappop(openq)
             c = state[0]
             self.expanded = expansions + 1
             if c == g and not held(c).overlaps(t - self.pad(t), FOREVER) and near.stays(c, t):
@@ -465,8 +466,7 @@ class SpaceTimeSearch:
                 if not near.may_move(c, n, t1, loose=squeezed and own):
                     continue
                 parent[nxt], times[nxt] = state, t1
-                f = round((t1 - t0) / tick + distance[n], 6)
-                heapq.heappush(openq, (f, distance[n], next(counter), nxt, t1))
+                heapq.heappush(openq, (t1 - t0 + distance[n] * tick, next(counter), nxt, t1))
         return None
 
     def _distances(self, goal: Cell, start: Cell) -> dict[Cell, float]:
