@@ -26,6 +26,7 @@ TRAFFIC_CELL = 0.2  # m: the reservation table's grid
 SPOT_MARGIN = 0.3  # m kept between two robots' discs at their goals (more than execution.traffic plans with)
 SPOT_STEP = 0.1  # m between the rings searched for a free spot
 SPOT_SEARCH_M = 4.0  # m: how far from the place a free spot is looked for
+WAIT_S = 0.5  # s: the shortest wait a plan holds (a fast robot's tick is shorter: 0.125 s for a Husky)
 WINDOW_S = 30.0  # s ahead a plan heeds others' reservations (windowed cooperative A*: it is replanned sooner)
 FOREVER = math.inf
 COMPASS = ("east", "north-east", "north", "north-west", "west", "south-west", "south", "south-east")
@@ -371,9 +372,11 @@ class SpaceTimeSearch:
 
     passable(cell): the robot may stand there (the map, inflated by its size). speed: m/s it is planned at.
     pad(t): seconds added on both sides of each reserved interval (timing uncertainty grows with time).
-    A state is (cell, time); moves go to the 8 neighbours or wait one tick where it stands. The heuristic is the
-    exact distance on the static grid (one Dijkstra from the goal), so the search only explores detours and
-    waits that the reservations force. Reservations are heeded window_s ahead (windowed cooperative A*, Silver
+    A state is (cell, time); moves go to the 8 neighbours (a tick each, one cell's travel) or wait WAIT_S
+    where it stands (a tick, if longer), and arrivals at a cell within WAIT_S of each other are one state: a
+    fast robot's short ticks do not multiply the states of its waits. The heuristic is the exact distance on
+    the static grid (one Dijkstra from the goal), so the search only explores detours and waits that the
+    reservations force. Reservations are heeded window_s ahead (windowed cooperative A*, Silver
     2005): beyond that, timing is too uncertain to plan around, and a search that must thread every far-off
     reservation fails for lack of expansions; the robot replans before its window runs out, and the claims
     keep it apart from the others meanwhile. Where others will stand for good is always heeded.
@@ -410,6 +413,7 @@ class SpaceTimeSearch:
         if s not in distance:
             return None
         tick = TRAFFIC_CELL / self.speed
+        wait = max(tick, WAIT_S)  # a wait lasts this long, and arrivals this close at a cell are one state
         offsets = disc_offsets(self.radius)
         near = Clearance(standing, self.radius, self.pad, {s: start, g: goal})
         self._near = near
@@ -450,15 +454,16 @@ class SpaceTimeSearch:
             if t - t0 > self.horizon_s:
                 continue
             lo, own = t - self.pad(t), c in mine
-            here, ends = held(c, own), {}  # per move length: (t1, t1 + pad), worked out once
+            here, ends = held(c, own), {}  # per step's duration: (t1, t1 + pad), worked out once
             for dc, dr, d in STEPS:
                 n = (c[0] + dc, c[1] + dr)
                 if n not in distance:
                     continue
-                if d not in ends:
-                    ends[d] = (t + d * tick, t + d * tick + self.pad(t + d * tick))
-                t1, hi = ends[d]
-                nxt = (n, round((t1 - t0) / tick))
+                dt = d * tick if n != c else wait
+                if dt not in ends:
+                    ends[dt] = (t + dt, t + dt + self.pad(t + dt))
+                t1, hi = ends[dt]
+                nxt = (n, round((t1 - t0) / wait))
                 if nxt in parent:  # reached already, as early (the cheap test first)
                     continue
                 if here.overlaps(lo, hi) or (n != c and held(n, own).overlaps(lo, hi)):
