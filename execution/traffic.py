@@ -305,6 +305,7 @@ def _plan(
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
         exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
         goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
+        still = _stoppable(goal, radius, still, exact)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
             path = _search(robot, planner, start, goal, speed, now, table, still, progress)
             through = _detour(path, start, goal, planner) if may_ask else None
@@ -325,6 +326,18 @@ def _plan(
         path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
     _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
     return path
+
+
+def _stoppable(goal, radius: float, still, exact):
+    """The robots standing as the search heeds them (`still`: with the planning margins), but at their exact
+    size (`exact`, in the same order) those the goal lies within the margins of: a goal kept from an earlier
+    plan of the trip (free_goal: moved only if a robot would touch it) where the search could never stop:
+    each of its searches spent its 60,000 states waiting for a way to stop there, and the robot drove the
+    map route, blind to the reservations (the replans of a trip, most robots' plans, are settled)."""
+    return [
+        (near if plain.segment_distance(goal, goal, grown.a, grown.b) < grown.r + radius else grown, since)
+        for (grown, since), (near, _) in zip(still, exact, strict=True)
+    ]
 
 
 def trip_planner(robot: Robot, start, goal):

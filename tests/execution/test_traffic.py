@@ -170,6 +170,18 @@ def test_when_the_reservations_leave_no_plan_the_robot_still_goes_round_the_robo
     assert traffic.searches(0.5)[-1] == (0.5, 0.0)  # it was the last search: only the room held now heeded
 
 
+def test_a_goal_kept_from_an_earlier_plan_next_to_a_robot_standing_is_reached_by_a_search(robots, caplog):
+    a, b = robots["a"], robots["b"]  # b stands at (0, -2)
+    near_b = (
+        0.0,
+        -2.0 + traffic.reach(a) + traffic.reach(b) + traffic.CLAIM_MARGIN + 0.03,
+    )  # inside the margins
+    with caplog.at_level("INFO", logger="execution.traffic"):
+        path = traffic.plan(a, (-2.0, 0.0), near_b, 0.5, settled=True)  # kept: nobody would touch it there
+    assert path[-1][:2] == pytest.approx(near_b)
+    assert "no conflict-free plan" not in caplog.text and "found no plan" not in caplog.text, caplog.text
+
+
 def test_a_corner_is_driven_to_closely_and_a_point_on_a_straight_way_loosely():
     round_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 11.2, 1.0, False), (6.0, 11.6, 2.0, False)]
     along_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 10.0, 1.0, False), (8.8, 11.0, 2.0, False)]
