@@ -96,6 +96,7 @@ MAKE_WAY_TTL_S = 240.0  # s a request to make way lasts (made way and back; refu
 MAKE_WAY_WAIT_S = 120.0  # s a robot that made way waits for the other to pass before it goes back
 MAKE_WAY_POLL_S = 0.5
 ASIDE_STEP = 0.25  # m between the rings (and the points on them) searched for a spot off another's way
+END_M = 1.0  # m from its start and its goal a plan may pass where the robot has room to pass but not to turn
 ASIDE_SEARCH_M = 6.0  # m from where it stands a robot making way looks for that spot
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
 
@@ -295,7 +296,7 @@ def _plan(
     reserve. Without a map, or with no plan within the searches' bounds, the map route (or the straight line)
     is reserved as it is. A plan that finds no way past idle robots parked on the map route, or only a long
     way round them (_detour), passes where they stand once they have made way, when they may be asked."""
-    planner = trip_planner(robot, start, goal)
+    planner, passable = trip_ground(robot, start, goal)
     radius = reach(robot)
     now = time.time()
     path = None
@@ -307,7 +308,7 @@ def _plan(
         goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         still = _stoppable(goal, radius, still, exact)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            path = _search(robot, planner, start, goal, speed, now, table, still, progress)
+            path = _search(robot, passable, start, goal, speed, now, table, still, progress)
             through = _detour(path, start, goal, planner) if may_ask else None
             idle = _idle_in_the_way(redis, robot, through, exact) if through else {}
             if idle:  # the same search with them gone from where they stand after MAKE_WAY_HOLD_S
@@ -315,7 +316,7 @@ def _plan(
                     cells = plain.footprint_cells(disc.a, disc.r)
                     table.reserve(str(pk), cells, now - 1.0, now + MAKE_WAY_HOLD_S)
                 rest = [(c, since) for c, since in still if int(c.label) not in idle]
-                passing = _search(robot, planner, start, goal, speed, now, table, rest, progress)
+                passing = _search(robot, passable, start, goal, speed, now, table, rest, progress)
                 asked = {pk: disc for pk, disc in idle.items() if passing and _passes(passing, disc, radius)}
                 if asked:  # (a plan that went round them all the same asks nobody)
                     path = passing
@@ -340,23 +341,33 @@ def _stoppable(goal, radius: float, still, exact):
     ]
 
 
-def trip_planner(robot: Robot, start, goal):
-    """The planner a trip is searched on: the one inflated by the disc the robot sweeps turning on the spot,
-    as it does where two legs of its route meet (planned by half its width, Huskies turning by a rack's
-    corner or a wall stalled against it: runs ah, ai), when start and goal lie in one region of its map; else
-    the one inflated by half its narrow side (a gap it can pass only straight, or a robot standing close to
-    a wall). None without a map."""
-    turning = route.planner_for(robot, turning=True)
-    if turning is None or turning.connected(tuple(start[:2]), tuple(goal[:2])):
-        return turning
-    return route.planner_for(robot)
+def trip_ground(robot: Robot, start, goal):
+    """(planner, passable) of a trip; (None, None) without a map. The planner is the map inflated by half the
+    robot's narrow side (the goal's ground, the map route); its plan goes where it has room to turn on the
+    spot (half its diagonal: it turns where two legs meet; planned by half its width, Huskies turning by a
+    rack's corner or a wall stalled: runs ah, ai), and within END_M of its start and its goal where it has
+    room to pass (a goal or a start by a wall or a shelf: when that sent a whole trip onto the narrow map, a
+    Husky stalled turning mid-aisle 0.5 m from a rack, tried as a user)."""
+    passing = route.planner_for(robot)
+    if passing is None:
+        return None, None
+    turning, narrow = _passable(route.planner_for(robot, turning=True)), _passable(passing)
+    ends = (tuple(start[:2]), tuple(goal[:2]))
+
+    def passable(cell) -> bool:
+        if turning(cell):
+            return True
+        point = plain.center_of(cell)
+        return narrow(cell) and any(math.dist(point, end) < END_M for end in ends)
+
+    return passing, passable
 
 
-def _search(robot: Robot, planner, start, goal, speed: float, now: float, table, still, progress):
-    """The first plan of searches() that finds one, or None."""
+def _search(robot: Robot, passable, start, goal, speed: float, now: float, table, still, progress):
+    """The first plan of searches() that finds one on these cells (passable), or None."""
     radius = reach(robot)
     for pace, window in searches(speed):
-        search = plain.SpaceTimeSearch(_passable(planner), radius, pace, pad(now), window_s=window)
+        search = plain.SpaceTimeSearch(passable, radius, pace, pad(now), window_s=window)
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
             if window < plain.WINDOW_S:

@@ -6,11 +6,9 @@ for robots without a navigation stack of their own, so that "move to C" goes aro
 
 from __future__ import annotations
 
-import functools
 import heapq
 import itertools
 import math
-from collections import deque
 
 import numpy as np
 
@@ -44,34 +42,6 @@ class Planner:
 
     def free(self, c: int, r: int, blocked: frozenset = frozenset()) -> bool:
         return 0 <= c < self.w and 0 <= r < self.h and not self.lethal[r, c] and (c, r) not in blocked
-
-    def connected(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
-        """Whether a robot of this planner's size can go from point a to point b on the map: both stand on
-        free ground, in one region of it."""
-        ca, cb = self.to_cell(*a), self.to_cell(*b)
-        if not (self.free(*ca) and self.free(*cb)):
-            return False
-        return self._regions[ca[1], ca[0]] == self._regions[cb[1], cb[0]]
-
-    @functools.cached_property
-    def _regions(self) -> np.ndarray:
-        """A label per cell, the same for free cells joined by free ones (8 neighbours); -1 where lethal."""
-        labels = np.full((self.h, self.w), -1, dtype=np.int32)
-        steps = [(dc, dr) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if dc or dr]
-        region = 0
-        for r0, c0 in zip(*np.nonzero(~self.lethal), strict=True):
-            if labels[r0, c0] >= 0:
-                continue
-            labels[r0, c0], todo = region, deque([(int(c0), int(r0))])
-            while todo:
-                c, r = todo.popleft()
-                for dc, dr in steps:
-                    n = (c + dc, r + dr)
-                    if self.free(*n) and labels[n[1], n[0]] < 0:
-                        labels[n[1], n[0]] = region
-                        todo.append(n)
-            region += 1
-        return labels
 
     def cells_near(self, avoid) -> frozenset:
         """The cells a robot of this planner's size cannot enter near these discs (x, y, radius)."""

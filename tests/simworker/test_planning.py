@@ -37,11 +37,3 @@ def test_a_robot_pressed_against_another_can_back_out_and_go_around():
     around = planner.plan(pressed, C, avoid=[(*SPOT_I, 0.3)])
     assert around is not None and around[-1] == C
     assert clearance(around[1:], around[0], SPOT_I) > 0.3 + 0.105
-
-
-def test_two_points_are_connected_only_on_free_ground_of_one_region():
-    planner = Planner(load_world("warehouse").map, 0.575)  # a Husky turning on the spot
-    assert planner.connected((1.2, 5.0), (27.0, 2.0))  # the west wall to the dock, round the racks
-    assert not planner.connected((1.2, 5.0), (4.0, 8.0))  # inside a rack
-    assert not planner.connected((1.2, 5.0), (3.05, 8.75))  # 0.45 m from a rack's face: free only passing
-    assert Planner(load_world("warehouse").map, 0.285).connected((1.2, 5.0), (3.05, 8.75))
