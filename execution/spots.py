@@ -83,7 +83,8 @@ def taken(exclude_ids, poses: dict) -> list[Disc]:
 
 def assign(destination: dict, robots: list[Robot], poses: dict, notes: list[str]) -> dict[int, dict]:
     """Each robot's goal for a step to this destination: its ring spot (several robots) or the place itself,
-    moved to the nearest free spot when taken; what was moved is told in notes. NoRoom when nothing is free."""
+    moved when taken to the nearest free spot where it can turn on the spot, else stand; what was moved is
+    told in notes. NoRoom when nothing is free."""
     place = destination.get("name") or "the goal"
     center = (float(destination["x"]), float(destination["y"]))
     wanted = ring_goals(destination, robots, poses) if len(robots) > 1 else {robots[0].pk: dict(destination)}
@@ -97,7 +98,9 @@ def assign(destination: dict, robots: list[Robot], poses: dict, notes: list[str]
             out[pk] = goal
         else:
             start = poses[pk][:2] if pk in poses else None
-            spot = free_spot(point, radius, others, is_free, prefer=start)
+            spot = free_spot(
+                point, radius, others, _ground(robot, row, turning=True), prefer=start
+            ) or free_spot(point, radius, others, is_free, prefer=start)
             if spot is None:
                 raise NoRoom(f"{place} is taken and no spot around it is free for {robot.name}.")
             out[pk] = {**goal, "x": spot[0], "y": spot[1], "around": place}
@@ -106,9 +109,11 @@ def assign(destination: dict, robots: list[Robot], poses: dict, notes: list[str]
     return out
 
 
-def _ground(robot: Robot, row):
-    """Whether a robot of this size may stand at (x, y) on the fleet map (anywhere, without a map)."""
-    planner = route.planner_for(robot, row)
+def _ground(robot: Robot, row, turning: bool = False):
+    """Whether a robot of this size may stand at (x, y) on the fleet map (anywhere, without a map); turning:
+    and turn there on the spot (a spot found for it, when the place is taken: a Husky sent to one 0.64 m
+    from a rack's corner stalled turning into it, tried as a user)."""
+    planner = route.planner_for(robot, row, turning=turning)
     if planner is None:
         return lambda x, y: True
     return lambda x, y: planner.free(*planner.to_cell(x, y))

@@ -178,3 +178,24 @@ def test_the_api_takes_the_robots_selected_on_the_page(
         "/api/instructions", {"text": "go to D", "robot_ids": "far"}, content_type="application/json"
     )
     assert bad.status_code == 422 and "robot_ids" in bad.content.decode()
+
+
+def test_spots_found_for_robots_when_the_place_is_taken_have_room_for_them_to_turn(
+    fleet, fleet_admin, no_runner, settings
+):
+    """Tried as a user: "move husky1, husky2 and tb05 to Cross" sent husky2 to a spot 1.4 m north of Cross,
+    0.64 m from a rack's corner, where it could stand but not turn, and it stalled turning into it."""
+    load_world_into_db("warehouse")
+    settings.FLEET_WORLD = "warehouse"
+    husky = [[-0.495, -0.285], [-0.495, 0.285], [0.495, 0.285], [0.495, -0.285]]  # the simulated Husky's
+    robots = [fleet("husky1", 1.2, 5.0, footprint=husky), fleet("husky2", 1.2, 6.5, footprint=husky)]
+    robots.append(fleet("tb05", 5.5, 1.0))
+    names = [robot.name for robot in robots]
+    instruction = submit(
+        "move husky1, husky2 and tb05 to Cross", fleet_admin, parse=parse(step(names, 15.0, 12.0, "Cross"))
+    )
+    assert "goes to a free spot" in instruction.outcome  # (the ring round Cross has no room for all three)
+    for execution in Execution.objects.filter(instruction=instruction):
+        goal = execution.steps[0]["destination"]
+        turning = dispatch.spots.route.planner_for(execution.robot, turning=True)
+        assert turning.free(*turning.to_cell(goal["x"], goal["y"])), (execution.robot.name, goal)
