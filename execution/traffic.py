@@ -546,8 +546,8 @@ def made_way(robot: Robot, failed: str = "") -> None:
 
 def searches(speed: float) -> list[tuple[float, float]]:
     """(pace, window) of the searches tried in turn until one finds a plan: the robot's pace; a fast robot's
-    again at SLOW_PLAN_MPS (a grid search pays for each wait in ticks of one cell's travel: the faster the
-    robot, the more of them); then heeding only the room others hold now and the robots standing (a way round
+    again at SLOW_PLAN_MPS (its moves are fewer ticks of search, and it finds plans a fast one does not);
+    then heeding only the room others hold now and the robots standing (a way round
     robots parked in the way, which the claims keep apart from the others, replanned as it goes). (A search
     heeding them 8 s ahead between, and such plans replanned every 4 s, was tried in run al: where robots
     standing left no way, each replan was four failed searches in the turn, the fleet waited 1,400 s for

@@ -359,11 +359,8 @@ class Clearance:
 
 SHORTCUT_REACH = 40  # points ahead a straight leg may join (string pulling costs grow with the square)
 MOVES = [(dc, dr, math.hypot(dc, dr)) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if dc or dr]
-STEPS = [*MOVES, (0, 0, 1.0)]
-DETOUR = (
-    1.5,
-    10,
-)  # the longest detour searched: this many times the shortest way, plus this many cells  # the moves and a wait of one tick where it stands
+STEPS = [*MOVES, (0, 0, 1.0)]  # the moves, and a wait where it stands (WAIT_S, or a tick if longer)
+DETOUR = (1.5, 10)  # the longest detour searched: this many times the shortest way, plus this many cells
 
 
 @dataclass
@@ -506,8 +503,8 @@ class SpaceTimeSearch:
         """Whether the goal can be reached past the robots standing at t0 at all, reservations aside (greedy
         best-first, a move as loose as the search ever allows). Robots standing never leave, and the others
         only add to what is in the way: where this fails, the search would fail too, after spending all its
-        expansions on waits (two seconds, in the turn the whole fleet waits for: run am's TIAGos did so three
-        searches a plan, plan after plan)."""
+        expansions on waits (two seconds, in the turn the whole fleet waits for). It did not fire in the
+        32-robot runs an to at, whose failed searches all had a way past those standing."""
         seen, todo = {s}, [(distance[s], s)]
         while todo:
             _, c = heapq.heappop(todo)
