@@ -299,16 +299,16 @@ def _plan(
     planner, passable = trip_ground(robot, start, goal)
     radius = reach(robot)
     now = time.time()
-    path = None
+    path, heeds = None, 0.0  # heeds: how far ahead the plan heeded the others' reservations
     if planner is not None:
         redis = coordination.connection()
         table, still = obstacles(redis, robot.pk, now, around)  # a snapshot: no lock
         grow = CLAIM_MARGIN + PLAN_MARGIN  # plan wider than claims need: a robot off its line still gets them
-        exact, still = still, [(plain.Capsule(c.a, c.b, c.r + grow, c.label), since) for c, since in still]
+        exact, still = still, [(_grown(c, grow), since) for c, since in still]
         goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         still = _stoppable(goal, radius, still, exact)
         if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            path = _search(robot, passable, start, goal, speed, now, table, still, progress)
+            path, heeds = _search(robot, passable, start, goal, speed, now, table, still, progress)
             through = _detour(path, start, goal, planner) if may_ask else None
             idle = _idle_in_the_way(redis, robot, through, exact) if through else {}
             if idle:  # the same search with them gone from where they stand after MAKE_WAY_HOLD_S
@@ -316,29 +316,39 @@ def _plan(
                     cells = plain.footprint_cells(disc.a, disc.r)
                     table.reserve(str(pk), cells, now - 1.0, now + MAKE_WAY_HOLD_S)
                 rest = [(c, since) for c, since in still if int(c.label) not in idle]
-                passing = _search(robot, passable, start, goal, speed, now, table, rest, progress)
+                passing, passing_heeds = _search(
+                    robot, passable, start, goal, speed, now, table, rest, progress
+                )
                 asked = {pk: disc for pk, disc in idle.items() if passing and _passes(passing, disc, radius)}
                 if asked:  # (a plan that went round them all the same asks nobody)
-                    path = passing
+                    path, heeds = passing, passing_heeds
                     _request_way(redis, robot, asked, through)
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
         goal = tuple(goal)
         path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
-    _reserve(coordination.connection(), robot, path, radius, now)  # one HSET of its own entry: no race
+    _reserve(coordination.connection(), robot, path, radius, now, heeds)  # one transaction, its own entries
     return path
 
 
 def _stoppable(goal, radius: float, still, exact):
-    """The robots standing as the search heeds them (`still`: with the planning margins), but at their exact
-    size (`exact`, in the same order) those the goal lies within the margins of: a goal kept from an earlier
-    plan of the trip (free_goal: moved only if a robot would touch it) where the search could never stop:
-    each of its searches spent its 60,000 states waiting for a way to stop there, and the robot drove the
-    map route, blind to the reservations (the replans of a trip, most robots' plans, are settled)."""
+    """The robots standing as the search heeds them (`still`: with the planning margins), but with only the
+    claims' margin (`exact`, in the same order, grown by CLAIM_MARGIN) those the goal lies within the planning
+    margins of: a goal kept from an earlier plan of the trip (free_goal: moved only if a claim would be
+    refused there) where the search could never stop: each of its searches spent its 60,000 states waiting
+    for a way to stop there, and the robot drove the map route, blind to the reservations (the replans of a
+    trip, most robots' plans, are settled). Not at their exact size: a plan round one 0.04 m nearer than
+    the claims allow was refused its stretch there, rerouted round it and replanned the same, four times,
+    and its step failed (run av)."""
     return [
-        (near if plain.segment_distance(goal, goal, grown.a, grown.b) < grown.r + radius else grown, since)
+        (_grown(near, CLAIM_MARGIN) if plain.segment_distance(goal, goal, grown.a, grown.b) < grown.r + radius
+         else grown, since)
         for (grown, since), (near, _) in zip(still, exact, strict=True)
-    ]
+    ]  # fmt: skip
+
+
+def _grown(capsule: plain.Capsule, margin: float) -> plain.Capsule:
+    return plain.Capsule(capsule.a, capsule.b, capsule.r + margin, capsule.label)
 
 
 def trip_ground(robot: Robot, start, goal):
@@ -364,7 +374,8 @@ def trip_ground(robot: Robot, start, goal):
 
 
 def _search(robot: Robot, passable, start, goal, speed: float, now: float, table, still, progress):
-    """The first plan of searches() that finds one on these cells (passable), or None."""
+    """The first plan of searches() that finds one on these cells (passable), and how far ahead it heeded the
+    others' reservations (s); (None, 0.0) when none finds one."""
     radius = reach(robot)
     for pace, window in searches(speed):
         search = plain.SpaceTimeSearch(passable, radius, pace, pad(now), window_s=window)
@@ -372,12 +383,12 @@ def _search(robot: Robot, passable, start, goal, speed: float, now: float, table
         if path is not None:
             if window < plain.WINDOW_S:
                 log.info("traffic: %s heeds only the room held now on its way to %s", robot.name, goal)
-            return path
+            return path, window
         log.info(
             "traffic: %s found no plan to %s heeding %.0f s ahead at %.2f m/s (%d states)",
             robot.name, goal, window, pace, search.expanded,
         )  # fmt: skip
-    return None
+    return None, 0.0
 
 
 def _length(points) -> float:
@@ -608,7 +619,10 @@ def _timed(points, speed: float, t0: float) -> list[tuple]:
     return out
 
 
-def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float) -> None:
+def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float, heeds: float) -> None:
+    """Write the robot's plan: its reserved cells (for the plans after it), its timed path up to where it
+    heeded the others' reservations (`heeds` s ahead: the claims keep its order there, first_to_pass), and its
+    route for the map."""
     table = plain.ReservationTable()
     table.reserve_path(str(robot.pk), path, radius, pad(now))
     busy = table.intervals()  # merged per cell: a few intervals each, not one per stretch that touches it
@@ -621,7 +635,12 @@ def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float) 
     entry = {"cells": cells, "goal": [x, y], "r": radius, "at": at, "expires": at + WAIT_LIMIT_S * 2}
     entry["path"] = [[round(p[0], 2), round(p[1], 2)] for p in path[:: max(1, len(path) // MAP_POINTS)]]
     entry["path"].append([round(x, 2), round(y, 2)])  # what a map that opens now draws (routes())
-    _put(redis, "plans", robot.pk, entry)
+    timed = [[round(x, 3), round(y, 3), round(t, 2)] for x, y, t in path]  # its order, for the claims
+    with redis.pipeline() as pipe:  # (one transaction: a claim never reads one plan's cells, another's order)
+        _put(pipe, "plans", robot.pk, entry)
+        order = {"path": timed, "r": radius, "until": round(now + heeds, 2), "expires": entry["expires"]}
+        _put(pipe, "timed", robot.pk, order)
+        pipe.execute()
 
 
 def routes(robot_ids) -> dict[int, dict]:
@@ -635,12 +654,15 @@ def routes(robot_ids) -> dict[int, dict]:
     }
 
 
-def claim(robot: Robot, start, end, progress=None, everyone=None) -> int | None:
+def claim(robot: Robot, start, end, progress=None, everyone=None, planned=None) -> int | None:
     """Claim the stretch from start to end for the robot (replacing its previous claim); the id of a robot in
-    the way (holding room there, or standing there), or None when the claim is the robot's.
+    the way (holding room there, or standing there, or planned there before this one: first_to_pass), or None
+    when the claim is the robot's.
 
     everyone: the robots standing (standing()), when the caller has them (a waiting robot reads them less
-    often than it tries)."""
+    often than it tries). planned: (t0, t1), the stretch's times in the robot's plan: the claim keeps the
+    plans' order (a robot planned there first and not yet past goes first), and the robot's progress (t0) is
+    written with it for the others to do the same."""
     radius, redis = reach(robot), coordination.connection()
     if everyone is None:
         everyone = standing(redis, {robot.pk})  # the slow part (database), before the transaction
@@ -649,7 +671,7 @@ def claim(robot: Robot, start, end, progress=None, everyone=None) -> int | None:
         with redis.pipeline() as pipe:
             try:
                 pipe.watch(_key("claims"))
-                return _claim(pipe, robot, start, end, radius, everyone)
+                return _claim(pipe, robot, start, end, radius, everyone, planned)
             except WatchError:  # another robot's claim was written between our read and our write: again
                 if time.monotonic() > deadline:
                     raise StepFailed("the traffic table is too busy to claim a stretch; try again") from None
@@ -657,15 +679,21 @@ def claim(robot: Robot, start, end, progress=None, everyone=None) -> int | None:
                     progress()
 
 
-def _claim(pipe, robot: Robot, start, end, radius: float, everyone) -> int | None:
+def _claim(pipe, robot: Robot, start, end, radius: float, everyone, planned) -> int | None:
     """Within a WATCH on the claims: the robot in the way, or write the claim (and drop the robot's wait)."""
-    claims = {pk: _capsule(pk, e) for pk, e in _live(pipe.hgetall(_key("claims"))).items() if pk != robot.pk}
+    held = {pk: e for pk, e in _live(pipe.hgetall(_key("claims"))).items() if pk != robot.pk}
+    claims = {pk: _capsule(pk, e) for pk, e in held.items()}
     others = [*claims.values(), *(disc for disc, _ in everyone if int(disc.label) not in claims)]
     blocker = plain.first_in_the_way(tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK)
+    if blocker is None and planned is not None and tuple(start) != tuple(end):
+        others = _planned(pipe, held)
+        blocker = plain.first_to_pass(tuple(start), tuple(end), *planned, radius, others, CLAIM_MARGIN)
     if blocker is not None:
         pipe.unwatch()
-        return int(blocker.label)
+        return int(blocker.label if isinstance(blocker, plain.Capsule) else blocker)
     entry = {"a": list(start), "b": list(end), "r": radius, "expires": time.time() + CLAIM_TTL_S}
+    if planned is not None:
+        entry["t"] = planned[0]
     pipe.multi()
     pipe.hset(_key("claims"), str(robot.pk), json.dumps(entry, separators=(",", ":")))
     pipe.hdel(_key("waits"), str(robot.pk))
@@ -673,11 +701,24 @@ def _claim(pipe, robot: Robot, start, end, radius: float, everyone) -> int | Non
     return None
 
 
+def _planned(redis, held: dict[int, dict]) -> list[plain.Planned]:
+    """The timed plans of the other robots under way (holding a claim: a plan whose robot's worker died
+    lapses with its claim) that heeded the reservations, each with its progress (the planned time of the
+    stretch it holds; its plan's start until it claims one) and the time up to which it heeded them."""
+    out = []
+    for pk, entry in _hash(redis, "timed").items():
+        if pk in held and entry["until"] > entry["path"][0][2]:
+            path = [tuple(p) for p in entry["path"]]
+            progress = held[pk].get("t", path[0][2])
+            out.append(plain.Planned(str(pk), path, entry["r"], progress, entry["until"]))
+    return out
+
+
 def release(robot: Robot, pose) -> None:
     """The step has ended: drop the robot's reservation, claim and wait; remember where it parked."""
     redis = coordination.connection()
     with redis.pipeline() as pipe:
-        for name in ("plans", "claims", "waits", "breaks"):
+        for name in ("plans", "timed", "claims", "waits", "breaks"):
             pipe.hdel(_key(name), str(robot.pk))
         if pose is not None:
             pipe.hset(_key("parked"), str(robot.pk), json.dumps({"x": pose[0], "y": pose[1]}))
@@ -692,9 +733,10 @@ def deadlocks() -> int:
     return int(coordination.connection().get(_key("deadlocks")) or 0)
 
 
-def wait_for(session: Session, start, end) -> None:
-    """Claim the stretch, waiting while another robot is in the way; raise Reroute to break a deadlock or to
-    go around a robot that is not under way; StepFailed after WAIT_LIMIT_S.
+def wait_for(session: Session, start, end, planned=None) -> None:
+    """Claim the stretch, waiting while another robot is in the way (or is planned there first: claim());
+    raise Reroute to break a deadlock or to go around a robot that is not under way; StepFailed after
+    WAIT_LIMIT_S. planned: the stretch's (t0, t1) in the robot's plan.
 
     A waiting robot holds only the room it stands in (others may pass behind it) and tries every WAIT_POLL_S;
     every NOTE_WAIT_S it reads the robots standing afresh, notes whom it waits for, keeps its claim alive and
@@ -702,12 +744,12 @@ def wait_for(session: Session, start, end) -> None:
     robot, redis = session.robot, coordination.connection()
     started = same_since = noted = told = time.monotonic()
     last, name, everyone = None, "", None
-    while (blocker := claim(robot, start, end, session.check, everyone)) is not None:
+    while (blocker := claim(robot, start, end, session.check, everyone, planned)) is not None:
         now = time.monotonic()
         if blocker != last:
             if last is None:  # it waits where it comes to rest: it holds that room, not the stretch behind
                 here = _at_rest(session)
-                claim(robot, here, here, session.check, everyone)
+                claim(robot, here, here, session.check, everyone, planned)
             same_since, last = now, blocker
             name = Robot.objects.filter(pk=blocker).values_list("name", flat=True).first() or f"#{blocker}"
             log.debug("traffic: %s waits for %s to go from %s to %s", robot.name, name, start, end)
@@ -943,6 +985,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
     windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
+        begins = due
         if i and windowed and _replan_now(time.time() - planned):
             raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
@@ -953,7 +996,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
         if hold:
             continue
         pose = session.pose()
-        wait_for(session, pose[:2], (x, y))
+        wait_for(session, pose[:2], (x, y), (begins, t))
         last = i == len(legs) - 1
         target = tuple(goal) if last else (x, y)
         distance = math.dist(pose[:2], target)

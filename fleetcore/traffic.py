@@ -572,6 +572,75 @@ def simplify(points: list[tuple[float, float, float]]) -> list[tuple[float, floa
     return out
 
 
+PRECEDENCE_STEP = 0.1  # m between the points of another's plan compared with a stretch (first_to_pass)
+
+
+@dataclass(frozen=True)
+class Planned:
+    """Another robot's plan as its stretches are checked against it: its timed path [(x, y, t), ...], its
+    radius, its progress (the planned time of the stretch it holds now: what lies before is behind it), and
+    the time up to which its plan heeded the others' reservations (beyond, its order means nothing)."""
+
+    label: str
+    path: Sequence[tuple[float, float, float]]
+    r: float
+    progress: float
+    until: float = math.inf
+
+
+def first_to_pass(
+    a: Point, b: Point, ta: float, tb: float, radius: float, others: Iterable[Planned], margin: float = 0.0
+):
+    """The first of the others whose plan has it near the stretch a -> b (planned from ta to tb) earlier than
+    this robot's plan has it there, and which has not got past there yet: this robot lets it pass first;
+    None when it goes first everywhere on the stretch.
+
+    The plans' order kept at run time, whatever their timing (an action dependency graph: Hoenig et al. 2019,
+    "Persistent and robust execution of MAPF schedules in warehouses"). A robot late on its plan keeps its
+    turn where its plan had it first, and one on time waits for it there, instead of taking the room first
+    and meeting it head on (robots late or early against their plans met so in the south aisle: run as).
+    Each robot waits only for one planned earlier than itself at the same place, so no wait goes round in a
+    cycle while the plans are free of conflicts. Near: within both radii (the reservations keep them farther
+    apart); compared at the point of the stretch nearest to each point of the other's plan.
+
+    Where the plans are not free of conflicts, the order would go round: so only the part of a plan that
+    heeded the reservations counts (up to `until`: not beyond its window, nothing of a plan blind to them),
+    and nothing of the other's plan from where it comes within reach (both radii and margin, as the claims
+    count) of `a`, where this robot stands: it cannot get there before this one has left, whatever the
+    plans say (a robot's plan may wait on its start past another's planned passage: the cells it stands on
+    are its own until it moves; keeping the order there had cycles, run v)."""
+    for other in others:
+        if _passes_first(a, b, ta, tb, radius, other, margin):
+            return other.label
+    return None
+
+
+def _passes_first(a: Point, b: Point, ta: float, tb: float, radius: float, other: Planned, margin: float):
+    near, blocked = radius + other.r, radius + other.r + margin
+    for p, q in itertools.pairwise([*other.path, other.path[-1]]):  # the last: where it stands, arrived
+        if p[2] > other.until:
+            return False
+        if q[2] < other.progress or segment_distance(a, b, p[:2], q[:2]) >= blocked:
+            continue
+        n = max(1, math.ceil(math.dist(p[:2], q[:2]) / PRECEDENCE_STEP))
+        for i in range(n + 1):
+            f = i / n
+            point, t = (p[0] + (q[0] - p[0]) * f, p[1] + (q[1] - p[1]) * f), p[2] + (q[2] - p[2]) * f
+            if t < other.progress and p[:2] != q[:2]:
+                continue  # driven past already (a wait it is in counts: it stands there now)
+            if t > other.until or math.dist(point, a) < blocked:
+                return False  # beyond what it heeded, or where this robot stands: behind it from here
+            on = nearest_on(point, a, b)
+            if math.dist(point, on) < near and t < _time_at(on, a, b, ta, tb):
+                return True
+    return False
+
+
+def _time_at(point: Point, a: Point, b: Point, ta: float, tb: float) -> float:
+    length = math.dist(a, b)
+    return ta if length == 0.0 else ta + (tb - ta) * math.dist(a, point) / length
+
+
 def wait_cycle(waits: dict[str, str], start: str) -> list[str] | None:
     """The cycle of robots waiting on each other that start is in ({robot: the robot it waits for}); None
     when start's chain of waits ends at a robot that waits for nobody (no deadlock)."""

@@ -42,6 +42,26 @@ def test_a_claimed_stretch_is_refused_to_a_robot_crossing_it_until_released(robo
     assert traffic.claim(b, (0.0, 2.0), (-1.0, 3.0)) is None  # and away from it
 
 
+def test_a_robot_on_time_lets_one_late_on_its_plan_pass_first_where_that_one_was_planned_first(robots):
+    """a's plan crosses x = 0 at now + 2 s, b's crosses y = 0 at now + 4 s. a is held up, still at its start;
+    b, on time, is refused its stretch across a's way (a goes first there, as planned). Once a holds a
+    stretch past the crossing, b gets it; a robot whose step ended (released) holds nobody up by its plan."""
+    a, b = robots["a"], robots["b"]
+    redis, now = traffic.coordination.connection(), time.time()
+    traffic._reserve(redis, a, [(-2.0, 0.0, now), (2.0, 0.0, now + 4.0)], traffic.reach(a), now, 30.0)
+    traffic._reserve(redis, b, [(0.0, -2.0, now), (0.0, 2.0, now + 8.0)], traffic.reach(b), now, 30.0)
+    assert traffic.claim(a, (-2.0, 0.0), (-2.0, 0.0), planned=(now, now)) is None  # a stands, late
+    across = ((0.0, -1.0), (0.0, 1.0))
+    assert traffic.claim(b, *across, planned=(now + 3.0, now + 5.0)) == a.pk
+    assert traffic.claim(b, (0.0, -2.0), (0.0, -1.5), planned=(now, now + 1.0)) is None  # short of it: free
+    assert traffic.claim(a, (1.0, 0.0), (2.0, 0.0), planned=(now + 3.0, now + 4.0)) is None
+    assert traffic.claim(b, *across, planned=(now + 3.0, now + 5.0)) is None
+    assert traffic.claim(b, (0.0, -1.5), (0.0, -1.5), planned=(now + 1.0, now + 1.0)) is None  # b back
+    traffic.claim(a, (-2.0, 0.0), (-2.0, 0.0), planned=(now, now))  # (a, as late as before)
+    traffic.release(a, None)
+    assert traffic.claim(b, *across, planned=(now + 3.0, now + 5.0)) is None
+
+
 def test_a_plan_goes_around_the_path_reserved_before_it(robots):
     a, b = robots["a"], robots["b"]
     first = traffic.plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
@@ -180,6 +200,21 @@ def test_a_goal_kept_from_an_earlier_plan_next_to_a_robot_standing_is_reached_by
         path = traffic.plan(a, (-2.0, 0.0), near_b, 0.5, settled=True)  # kept: nobody would touch it there
     assert path[-1][:2] == pytest.approx(near_b)
     assert "no conflict-free plan" not in caplog.text and "found no plan" not in caplog.text, caplog.text
+
+
+def test_a_plan_to_a_goal_next_to_a_robot_standing_goes_round_it_as_far_as_the_claims_ask(robots):
+    """A settled goal just west of b, reached from the east: the plan goes round b no nearer than the claims
+    let it, so each of its stretches is granted (planned round b at b's bare size, it passed 0.04 m too near:
+    refused there, rerouted and planned the same, four times, and the step failed: run av)."""
+    a, b = robots["a"], robots["b"]  # b stands at (0, -2)
+    west_of_b = (-(traffic.reach(a) + traffic.reach(b) + traffic.CLAIM_MARGIN + 0.03), -2.0)
+    path = traffic.plan(a, (2.0, -2.0), west_of_b, 0.5, settled=True)
+    assert path[-1][:2] == pytest.approx(west_of_b)
+    here = (2.0, -2.0)
+    for x, y, _, hold in traffic.stretches(path):
+        if not hold:
+            assert traffic.claim(a, here, (x, y)) is None, (here, (x, y))
+            here = (x, y)
 
 
 def test_a_corner_is_driven_to_closely_and_a_point_on_a_straight_way_loosely():

@@ -197,3 +197,73 @@ def test_a_fast_robot_waiting_long_spends_no_more_states_than_a_slow_one():
         expanded[speed] = search.expanded
     slow, fast = expanded.values()
     assert fast < 2 * slow, expanded  # tick by tick, the fast one spent 7 times as many (97,000)
+
+
+def stretches_of(path, longest=1.2):
+    """A timed path cut into stretches of at most `longest` metres: [(a, b, ta, tb), ...] (waits left out)."""
+    out = []
+    for p, q in itertools.pairwise(path):
+        n = max(1, math.ceil(math.dist(p[:2], q[:2]) / longest))
+        for i in range(n):
+            f0, f1 = i / n, (i + 1) / n
+            a = (p[0] + (q[0] - p[0]) * f0, p[1] + (q[1] - p[1]) * f0)
+            b = (p[0] + (q[0] - p[0]) * f1, p[1] + (q[1] - p[1]) * f1)
+            if a != b:
+                out.append((a, b, p[2] + (q[2] - p[2]) * f0, p[2] + (q[2] - p[2]) * f1))
+    return out
+
+
+def test_a_robot_late_on_its_plan_keeps_its_turn_where_its_plan_had_it_first():
+    """o's plan crosses x = 0 at t = 2, r's at t = 3 (after o). o is late: it has not set off at all. r, on time,
+    lets it pass first at the crossing; once o holds a stretch beyond it, r goes."""
+    o_path = [(-2.0, 0.0, 0.0), (2.0, 0.0, 4.0)]
+    crossing = ((0.0, -1.0), (0.0, 1.0), 2.0, 4.0)  # r's stretch: at the crossing at t = 3
+    late = traffic.Planned("o", o_path, 0.2, progress=0.0)
+    assert traffic.first_to_pass(*crossing, 0.2, [late]) == "o"
+    past = traffic.Planned("o", o_path, 0.2, progress=3.0)  # o's stretch now begins at x = 1: it has passed
+    assert traffic.first_to_pass(*crossing, 0.2, [past]) is None
+    before = ((0.0, -1.0), (0.0, 1.0), 0.0, 2.0)  # r planned at the crossing at t = 1, before o
+    assert traffic.first_to_pass(*before, 0.2, [late]) is None  # r goes first: o will wait for it
+    assert traffic.first_to_pass((0.0, -3.0), (0.0, -2.0), 2.0, 4.0, 0.2, [late]) is None  # nowhere near
+
+
+def test_a_plan_counts_for_the_order_only_where_it_heeded_the_others_and_up_to_where_this_robot_stands():
+    """o planned blind beyond t = 1 (its window, or no plan heeding the reservations) has no turn at the
+    crossing it reaches at t = 2. o planned through where r stands (at t = 2, r leaving at t = 3: a start's
+    cells are its robot's own until it moves) cannot get there before r leaves: r does not wait for it, even
+    where o's plan has it first after that (the order would go round: run v)."""
+    crossing = ((0.0, -1.0), (0.0, 1.0), 2.0, 4.0)
+    blind = traffic.Planned("o", [(-2.0, 0.0, 0.0), (2.0, 0.0, 4.0)], 0.2, progress=0.0, until=1.0)
+    assert traffic.first_to_pass(*crossing, 0.2, [blind]) is None
+    through = [(-2.0, -1.0, 0.0), (0.0, -1.0, 2.0), (0.0, 1.0, 2.5)]  # over r's spot, then up r's way
+    assert traffic.first_to_pass(*crossing, 0.2, [traffic.Planned("o", through, 0.2, 0.0)], 0.05) is None
+    ahead = [(-2.0, 0.5, 0.0), (0.0, 0.5, 2.0), (2.0, 0.5, 4.0)]  # the same, passing only ahead of r
+    assert traffic.first_to_pass(*crossing, 0.2, [traffic.Planned("o", ahead, 0.2, 0.0)], 0.05) == "o"
+
+
+def test_no_two_robots_on_conflict_free_plans_each_wait_for_the_other_to_pass_first():
+    """The plans' order as the claims keep it: for two pairs swapping places (prioritized plans), whatever
+    stretch each robot has reached, never does each wait for the other (first_to_pass), which would be a
+    deadlock; and some robot does wait for another somewhere (the plans do cross)."""
+    table, plans, parked = ReservationTable(), {}, []
+    tasks = {
+        "a": ((-2.0, 0.1), (2.0, 0.1)),
+        "b": ((2.0, 0.1), (-2.0, 0.1)),
+        "c": ((0.1, -2.0), (0.1, 2.0)),
+        "d": ((0.1, 2.0), (0.1, -2.0)),
+    }
+    for robot, (start, goal) in tasks.items():
+        plans[robot] = search().plan(start, goal, 0.0, table, robot, parked)
+        table.reserve_path(robot, plans[robot], 0.15, lambda t: 0.3)
+        parked.append((Capsule(goal, goal, 0.15, robot), plans[robot][-1][2]))
+    waits = 0
+    for r, o in itertools.permutations(plans, 2):
+        for a, b, ta, tb in stretches_of(plans[r]):
+            for oa, ob, ota, otb in stretches_of(plans[o]):
+                r_waits = traffic.first_to_pass(a, b, ta, tb, 0.15, [traffic.Planned(o, plans[o], 0.15, ota)])
+                o_waits = traffic.first_to_pass(
+                    oa, ob, ota, otb, 0.15, [traffic.Planned(r, plans[r], 0.15, ta)]
+                )
+                assert not (r_waits and o_waits), (r, (a, b, ta, tb), o, (oa, ob, ota, otb))
+                waits += bool(r_waits)
+    assert waits > 0
