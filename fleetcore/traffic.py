@@ -589,7 +589,14 @@ class Planned:
 
 
 def first_to_pass(
-    a: Point, b: Point, ta: float, tb: float, radius: float, others: Iterable[Planned], margin: float = 0.0
+    a: Point,
+    b: Point,
+    ta: float,
+    tb: float,
+    radius: float,
+    others: Iterable[Planned],
+    margin: float = 0.0,
+    ahead: float = 0.0,
 ):
     """The first of the others whose plan has it near the stretch a -> b (planned from ta to tb) earlier than
     this robot's plan has it there, and which has not got past there yet: this robot lets it pass first;
@@ -605,35 +612,50 @@ def first_to_pass(
 
     Where the plans are not free of conflicts, the order would go round: so only the part of a plan that
     heeded the reservations counts (up to `until`: not beyond its window, nothing of a plan blind to them),
-    and nothing of the other's plan from where it comes within reach (both radii and margin, as the claims
-    count) of `a`, where this robot stands: it cannot get there before this one has left, whatever the
-    plans say (a robot's plan may wait on its start past another's planned passage: the cells it stands on
-    are its own until it moves; keeping the order there had cycles, run v)."""
+    and the other does not go first if, on its way there or within `ahead` metres after (the stretch it
+    would claim), it comes within reach of `a`, where this robot stands (both radii and `margin`: the
+    claims' margin and how far a robot strays from its plan): it cannot pass there before this one has
+    left, whatever the plans say (a robot's plan may wait on its start past another's planned passage: the
+    cells it stands on are its own until it moves; keeping the order there had cycles, run v)."""
     for other in others:
-        if _passes_first(a, b, ta, tb, radius, other, margin):
+        if _passes_first(a, b, ta, tb, radius, other, margin, ahead):
             return other.label
     return None
 
 
-def _passes_first(a: Point, b: Point, ta: float, tb: float, radius: float, other: Planned, margin: float):
+def _passes_first(a, b, ta, tb, radius: float, other: Planned, margin: float, ahead: float) -> bool:
     near, blocked = radius + other.r, radius + other.r + margin
+    first, driven = None, 0.0  # how far along its plan it first comes near the stretch before this robot
     for p, q in itertools.pairwise([*other.path, other.path[-1]]):  # the last: where it stands, arrived
-        if p[2] > other.until:
-            return False
-        if q[2] < other.progress or segment_distance(a, b, p[:2], q[:2]) >= blocked:
+        if q[2] < other.progress:
             continue
-        n = max(1, math.ceil(math.dist(p[:2], q[:2]) / PRECEDENCE_STEP))
+        length = math.dist(p[:2], q[:2])
+        if first is None and p[2] > other.until:
+            return False  # beyond what it heeded: no turn of its own from here
+        if first is not None and driven > first + ahead:
+            return True
+        if segment_distance(a, a, p[:2], q[:2]) >= blocked and (
+            first is not None or segment_distance(a, b, p[:2], q[:2]) >= near
+        ):  # a leg far from this robot and, till a turn is found, from its stretch: nothing to look at
+            driven += length
+            continue
+        n = max(1, math.ceil(length / PRECEDENCE_STEP))
         for i in range(n + 1):
             f = i / n
             point, t = (p[0] + (q[0] - p[0]) * f, p[1] + (q[1] - p[1]) * f), p[2] + (q[2] - p[2]) * f
             if t < other.progress and p[:2] != q[:2]:
                 continue  # driven past already (a wait it is in counts: it stands there now)
-            if t > other.until or math.dist(point, a) < blocked:
-                return False  # beyond what it heeded, or where this robot stands: behind it from here
-            on = nearest_on(point, a, b)
-            if math.dist(point, on) < near and t < _time_at(on, a, b, ta, tb):
+            along = driven + length * f
+            if first is not None and along > first + ahead:
                 return True
-    return False
+            if math.dist(point, a) < blocked:
+                return False  # it would have to pass where this robot stands: behind it from here
+            if first is None and t <= other.until:
+                on = nearest_on(point, a, b)
+                if math.dist(point, on) < near and t < _time_at(on, a, b, ta, tb):
+                    first = along
+        driven += length
+    return first is not None
 
 
 def _time_at(point: Point, a: Point, b: Point, ta: float, tb: float) -> float:

@@ -228,6 +228,7 @@ def test_a_robot_late_on_its_plan_keeps_its_turn_where_its_plan_had_it_first():
 
 
 def test_a_plan_counts_for_the_order_only_where_it_heeded_the_others_and_up_to_where_this_robot_stands():
+    # (and up to `ahead` metres after its turn: the stretch it would claim there must not reach r either)
     """o planned blind beyond t = 1 (its window, or no plan heeding the reservations) has no turn at the
     crossing it reaches at t = 2. o planned through where r stands (at t = 2, r leaving at t = 3: a start's
     cells are its robot's own until it moves) cannot get there before r leaves: r does not wait for it, even
@@ -239,6 +240,11 @@ def test_a_plan_counts_for_the_order_only_where_it_heeded_the_others_and_up_to_w
     assert traffic.first_to_pass(*crossing, 0.2, [traffic.Planned("o", through, 0.2, 0.0)], 0.05) is None
     ahead = [(-2.0, 0.5, 0.0), (0.0, 0.5, 2.0), (2.0, 0.5, 4.0)]  # the same, passing only ahead of r
     assert traffic.first_to_pass(*crossing, 0.2, [traffic.Planned("o", ahead, 0.2, 0.0)], 0.05) == "o"
+    turning = [(-2.0, 0.3, 0.0), (0.0, 0.3, 2.0), (0.0, -0.8, 3.0)]  # ahead of r, then to where r stands
+    o = traffic.Planned("o", turning, 0.2, 0.0)
+    assert traffic.first_to_pass(*crossing, 0.2, [o], 0.05, ahead=0.0) == "o"
+    assert traffic.first_to_pass(*crossing, 0.2, [o], 0.05, ahead=1.0) == "o"  # 1.25 m on, it reaches r
+    assert traffic.first_to_pass(*crossing, 0.2, [o], 0.05, ahead=1.5) is None  # within the stretch it claims
 
 
 def test_no_two_robots_on_conflict_free_plans_each_wait_for_the_other_to_pass_first():
