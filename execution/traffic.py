@@ -769,7 +769,9 @@ def wait_for(session: Session, start, end, planned=None) -> None:
             noted = -math.inf
         if now - noted >= NOTE_WAIT_S:
             noted, everyone = now, standing(redis, {robot.pk})
-            _put(redis, "waits", robot.pk, {"for": blocker, "why": why[-1], "expires": time.time() + 2.0})
+            wanted = [[round(v, 2) for v in point[:2]] for point in (start, end)]
+            entry = {"for": blocker, "why": why[-1], "to": wanted, "expires": time.time() + 2.0}
+            _put(redis, "waits", robot.pk, entry)
             _renew(redis, robot.pk)
             _check_deadlock(redis, robot.pk)
             if now - same_since > REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
@@ -864,7 +866,9 @@ def _check_deadlock(redis, robot_id: int) -> None:
             pipe.execute()
         except WatchError:  # a wait changed as we read: the next check (NOTE_WAIT_S on) reads it afresh
             return
-    why = {pk: entries[int(pk)].get("why") for pk in cycle}  # what each waits for: room, or its turn (order)
+    why = {  # what each waits for (room, or its turn: order) and the stretch it waits to drive
+        pk: (entries[int(pk)].get("why"), entries[int(pk)].get("to")) for pk in cycle
+    }
     log.info(
         "traffic: deadlock among robots %s broken by %s (room held: %s; waits: %s)",
         cycle,
