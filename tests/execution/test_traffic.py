@@ -104,6 +104,29 @@ def test_a_wait_for_cycle_is_broken_by_the_robot_that_gave_way_least_then_the_hi
     assert traffic.deadlocks() == before + 2
 
 
+def test_a_waiting_robot_notes_the_stretch_it_waits_to_drive_and_a_deadlock_log_gives_each(
+    robots, monkeypatch, caplog
+):
+    """What a deadlock's log line says of each robot of the cycle: whom it waits for, why, and the stretch it
+    waits to drive (how the face-to-face cycles of runs bd and after were told apart)."""
+    a, b = robots["a"], robots["b"]
+    monkeypatch.setattr(traffic, "WAIT_LIMIT_S", 0.3)
+    assert traffic.claim(b, (0.0, -2.0), (0.0, 2.0)) is None  # b holds a stretch across a's way
+    with pytest.raises(traffic.StepFailed):
+        traffic.wait_for(StandingSession(a, (-2.0, 0.0, 0.0)), (-2.0, 0.0), (2.0, 0.0))
+    redis = traffic.coordination.connection()
+    wait = traffic._hash(redis, "waits")[a.pk]
+    assert (wait["for"], wait["why"], wait["to"]) == (b.pk, "room", [[-2.0, 0.0], [2.0, 0.0]])
+    across = {"for": a.pk, "why": "room", "to": [[0.0, -2.0], [0.0, 2.0]], "expires": 1e12}
+    traffic._put(redis, "waits", b.pk, across)  # and b waits for a: a cycle
+    caplog.set_level("INFO", logger="execution.traffic")
+    with pytest.raises(traffic.Reroute):
+        for robot in sorted((a, b), key=lambda r: r.pk):  # the higher id breaks it
+            traffic._check_deadlock(redis, robot.pk)
+    line = next(r.getMessage() for r in caplog.records if "deadlock among" in r.getMessage())
+    assert "('room', [[-2.0, 0.0], [2.0, 0.0]])" in line and "('room', [[0.0, -2.0], [0.0, 2.0]])" in line
+
+
 def test_the_map_is_told_the_route_and_whom_a_robot_waits_for(robots, monkeypatch):
     sent = []
     monkeypatch.setattr(live, "send_on_commit", lambda group, payload: sent.append((group, payload)))
