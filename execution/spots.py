@@ -17,6 +17,7 @@ from fleetcore.traffic import Disc, clear_of, compass, free_spot
 from robots.models import Robot
 
 RING_MARGIN = 0.35  # metres between neighbouring robots on the ring
+STAY_SLACK_M = 0.1  # m a robot standing free by a place may be farther from it than its spot, and stay
 UNKNOWN_RADIUS = 0.3  # m, a robot without a footprint
 
 
@@ -94,19 +95,31 @@ def assign(destination: dict, robots: list[Robot], poses: dict, notes: list[str]
         robot, radius, point = by_id[pk], radius_of(by_id[pk]), (goal["x"], goal["y"])
         is_free = _ground(robot, row)
         blocker = clear_of(point, radius, others)
-        if blocker is None and is_free(*point):
-            out[pk] = goal
-        else:
-            start = poses[pk][:2] if pk in poses else None
+        here = tuple(poses[pk][:2]) if pk in poses else None
+        spot = point
+        if blocker is not None or not is_free(*point):
             spot = free_spot(
-                point, radius, others, _ground(robot, row, turning=True), prefer=start
-            ) or free_spot(point, radius, others, is_free, prefer=start)
+                point, radius, others, _ground(robot, row, turning=True), prefer=here
+            ) or free_spot(point, radius, others, is_free, prefer=here)
             if spot is None:
                 raise NoRoom(f"{place} is taken and no spot around it is free for {robot.name}.")
-            out[pk] = {**goal, "x": spot[0], "y": spot[1], "around": place}
-            notes.append(_moved(place, center, blocker, robot, spot))
+        stays = here is not None and _already_there(here, spot, center, radius, others, is_free)
+        if stays:
+            spot = (round(here[0], 3), round(here[1], 3))
+        out[pk] = goal if spot == point else {**goal, "x": spot[0], "y": spot[1], "around": place}
+        if spot != point and (not stays or math.dist(spot, point) >= STAY_SLACK_M):
+            notes.append(_moved(place, center, blocker, robot, spot, stays))
         others.append(Disc(out[pk]["x"], out[pk]["y"], radius, f"{robot.name}'s goal"))
     return out
+
+
+def _already_there(here, spot, center, radius: float, others: list[Disc], is_free) -> bool:
+    """Whether a robot is to stay where it stands rather than go to `spot`: it stands free of the others and
+    their goals, where it may stand, no farther from the place than that spot (within STAY_SLACK_M). Tried as a
+    user: "move husky1, husky2 and tb05 to Cross" said twice moved husky2, parked by a rack after the first,
+    to another spot a metre off, and it stalled turning by the rack three times."""
+    near = math.dist(here, center) <= math.dist(spot, center) + STAY_SLACK_M
+    return near and clear_of(here, radius, others) is None and is_free(*here)
 
 
 def _ground(robot: Robot, row, turning: bool = False):
@@ -119,8 +132,10 @@ def _ground(robot: Robot, row, turning: bool = False):
     return lambda x, y: planner.free(*planner.to_cell(x, y))
 
 
-def _moved(place: str, center, blocker: Disc | None, robot: Robot, spot) -> str:
+def _moved(place: str, center, blocker: Disc | None, robot: Robot, spot, stays: bool = False) -> str:
     why = f"{place} is taken by {blocker.label}" if blocker else f"{place} has no room for {robot.name}"
     distance = math.dist(center, spot)
     where = f"{distance:.1f} m {compass(center, spot)} of {place}" if distance >= 0.05 else f"at {place}"
+    if stays:  # (already by the place: it needs no reason unless the place is taken)
+        return f"{why + ': ' if blocker else ''}{robot.name} stays where it stands, {where}"
     return f"{why}: {robot.name} goes to a free spot {where}"

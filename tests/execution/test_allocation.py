@@ -199,3 +199,39 @@ def test_spots_found_for_robots_when_the_place_is_taken_have_room_for_them_to_tu
         goal = execution.steps[0]["destination"]
         turning = dispatch.spots.route.planner_for(execution.robot, turning=True)
         assert turning.free(*turning.to_cell(goal["x"], goal["y"])), (execution.robot.name, goal)
+
+
+def test_robots_sent_again_to_the_place_they_stand_round_stay_where_they_stand(
+    fleet, fleet_admin, no_runner, settings
+):
+    """Tried as a user: "move husky1, husky2 and tb05 to Cross" said a second time, once all three stood round
+    Cross, sent husky2, parked by a rack, to another spot a metre off, and it stalled turning by the rack three
+    times. A robot standing free by the place, no farther from it than its spot, stays; a robot elsewhere
+    still goes to the place."""
+    load_world_into_db("warehouse")
+    settings.FLEET_WORLD = "warehouse"
+    husky = [[-0.495, -0.285], [-0.495, 0.285], [0.495, 0.285], [0.495, -0.285]]  # the simulated Husky's
+    robots = [fleet("husky1", 1.2, 5.0, footprint=husky), fleet("husky2", 1.2, 6.5, footprint=husky)]
+    robots.append(fleet("tb05", 5.5, 1.0))
+    names = [robot.name for robot in robots]
+    text, parsed = "move husky1, husky2 and tb05 to Cross", parse(step(names, 15.0, 12.0, "Cross"))
+    first = submit(text, fleet_admin, parse=parsed)
+    goals = {}
+    for execution in Execution.objects.filter(instruction=first):  # each arrives at its goal
+        goal = execution.steps[0]["destination"]
+        goals[execution.robot.name] = (goal["x"], goal["y"])
+        key = live.POSE_CACHE_KEY.format(id=execution.robot.pk)
+        cache.set(key, {"id": execution.robot.pk, "x": goal["x"], "y": goal["y"], "yaw": 0.0}, 60)
+    Execution.objects.filter(instruction=first).update(status="succeeded")
+    again = submit(text, fleet_admin, parse=parsed)
+    for execution in Execution.objects.filter(instruction=again):
+        goal = execution.steps[0]["destination"]
+        assert math.dist((goal["x"], goal["y"]), goals[execution.robot.name]) < 1e-3, execution.robot.name
+    assert "goes to a free spot" not in again.outcome and "stays where it stands" in again.outcome
+    cache.set(
+        live.POSE_CACHE_KEY.format(id=robots[2].pk), {"id": robots[2].pk, "x": 5.5, "y": 1.0, "yaw": 0.0}, 60
+    )
+    Execution.objects.filter(instruction=again).update(status="succeeded")
+    alone = submit("move tb05 to Cross", fleet_admin, parse=parse(step(["tb05"], 15.0, 12.0, "Cross")))
+    goal = Execution.objects.get(instruction=alone).steps[0]["destination"]
+    assert math.dist((goal["x"], goal["y"]), (5.5, 1.0)) > 5.0  # from afar it goes, as before
