@@ -180,16 +180,21 @@ def test_the_api_takes_the_robots_selected_on_the_page(
     assert bad.status_code == 422 and "robot_ids" in bad.content.decode()
 
 
+def three_in_the_warehouse(fleet, settings):
+    """husky1, husky2 (the simulated Husky's footprint) and tb05 at their start poses in the warehouse world."""
+    load_world_into_db("warehouse")
+    settings.FLEET_WORLD = "warehouse"
+    husky = [[-0.495, -0.285], [-0.495, 0.285], [0.495, 0.285], [0.495, -0.285]]
+    robots = [fleet("husky1", 1.2, 5.0, footprint=husky), fleet("husky2", 1.2, 6.5, footprint=husky)]
+    return [*robots, fleet("tb05", 5.5, 1.0)]
+
+
 def test_spots_found_for_robots_when_the_place_is_taken_have_room_for_them_to_turn(
     fleet, fleet_admin, no_runner, settings
 ):
     """Tried as a user: "move husky1, husky2 and tb05 to Cross" sent husky2 to a spot 1.4 m north of Cross,
     0.64 m from a rack's corner, where it could stand but not turn, and it stalled turning into it."""
-    load_world_into_db("warehouse")
-    settings.FLEET_WORLD = "warehouse"
-    husky = [[-0.495, -0.285], [-0.495, 0.285], [0.495, 0.285], [0.495, -0.285]]  # the simulated Husky's
-    robots = [fleet("husky1", 1.2, 5.0, footprint=husky), fleet("husky2", 1.2, 6.5, footprint=husky)]
-    robots.append(fleet("tb05", 5.5, 1.0))
+    robots = three_in_the_warehouse(fleet, settings)
     names = [robot.name for robot in robots]
     instruction = submit(
         "move husky1, husky2 and tb05 to Cross", fleet_admin, parse=parse(step(names, 15.0, 12.0, "Cross"))
@@ -208,11 +213,7 @@ def test_robots_sent_again_to_the_place_they_stand_round_stay_where_they_stand(
     Cross, sent husky2, parked by a rack, to another spot a metre off, and it stalled turning by the rack three
     times. A robot standing free by the place, no farther from it than its spot, stays; a robot elsewhere
     still goes to the place."""
-    load_world_into_db("warehouse")
-    settings.FLEET_WORLD = "warehouse"
-    husky = [[-0.495, -0.285], [-0.495, 0.285], [0.495, 0.285], [0.495, -0.285]]  # the simulated Husky's
-    robots = [fleet("husky1", 1.2, 5.0, footprint=husky), fleet("husky2", 1.2, 6.5, footprint=husky)]
-    robots.append(fleet("tb05", 5.5, 1.0))
+    robots = three_in_the_warehouse(fleet, settings)
     names = [robot.name for robot in robots]
     text, parsed = "move husky1, husky2 and tb05 to Cross", parse(step(names, 15.0, 12.0, "Cross"))
     first = submit(text, fleet_admin, parse=parsed)
