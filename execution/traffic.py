@@ -64,6 +64,10 @@ PLAN_MARGIN = 0.1  # m more again when planning round robots that stand (robots 
 CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses after this
 RENEW_BEFORE_S = 20.0  # a waiting robot renews its claim once less than this is left of it
 CLAIM_LIMIT_S = 10.0  # s of claims lost to others' writes (WATCH) before a claim gives up
+HORIZON_S = 900.0  # s: plans heed the others' reservations all the way (no window)
+PLAN_AGAIN_S = 2.0  # s a robot with no plan clear of the others stands before it plans again
+SETTLE_M = 0.05  # m from its goal a robot stopped at a free spot next to it (a robot stood there)...
+SETTLE_TRIES = 2  # ... plans again for the goal, this many times at most (the other may have left)
 HOLD_S = 4.0  # s the cells another robot holds now are reserved for, in a newcomer's plan
 UNPLANNED_HOLD_S = 20.0  # s the same for a robot about to set off that has not planned yet (its turn comes)
 WAIT_LIMIT_S = 120.0  # s a robot waits for cells before its step fails
@@ -76,7 +80,9 @@ TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together
 TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
 TURN_POLL_S = 0.05
 PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
-MAX_REPLANS = 40  # plans of one trip, its window run out each time (REPLAN_S apart): a 10-minute trip
+MAX_REPLANS = (
+    80  # plans of one trip: reroutes, and tries every PLAN_AGAIN_S while no plan is clear of the others
+)
 REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned when nobody else plans...
 REPLAN_LAST_S = plain.WINDOW_S * 0.8  # s ... and before it is replanned in any case (_replan_now)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
@@ -191,19 +197,11 @@ def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
         if pk == robot_id:
             continue
         held = _capsule(pk, entry)
-        if pk in around:
+        if pk in around or pk not in plans:  # not planned yet: where it stands, for good, as far as we know
             still.append((held, -math.inf))
-        else:  # one without a plan yet waits for its turn to plan, which will heed this one: it stays till then
-            until = now + (HOLD_S if pk in plans else UNPLANNED_HOLD_S)
-            table.reserve(str(pk), plain.swept_cells(held.a, held.b, held.r), now - 1.0, until)
-    busy = busy_ids()
-    for disc, since in standing(redis, {robot_id, *claims, *plans}):
-        if int(disc.label) in busy:  # about to set off: in the way for now, not for good
-            table.reserve(
-                disc.label, plain.footprint_cells(disc.a, disc.r), now - 1.0, now + UNPLANNED_HOLD_S
-            )
         else:
-            still.append((disc, since))
+            table.reserve(str(pk), plain.swept_cells(held.a, held.b, held.r), now - 1.0, now + HOLD_S)
+    still.extend(standing(redis, {robot_id, *claims, *plans}))
     return table, still
 
 
@@ -248,13 +246,14 @@ def plan(
     done = time.monotonic()
     if may_ask:
         ask_to_make_way(robot)
-    log.info(
-        "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
-        robot.name,
-        done - began,
-        began - asked,
-        path[-1][2] - path[0][2],
-    )
+    if path is not None:
+        log.info(
+            "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
+            robot.name,
+            done - began,
+            began - asked,
+            path[-1][2] - path[0][2],
+        )
     return path
 
 
@@ -332,10 +331,11 @@ def _plan(
                 if asked:  # (a plan that went round them all the same asks nobody)
                     path, heeds = passing, passing_heeds
                     _request_way(redis, robot, asked, through)
+    if path is None and planner is None:
+        path, heeds = _timed([tuple(start), tuple(goal)], speed, now), 0.0
     if path is None:
-        log.info("traffic: %s has no conflict-free plan to %s; driving the map route", robot.name, goal)
-        goal = tuple(goal)
-        path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
+        log.info("traffic: %s has no conflict-free plan to %s; it stands and plans again", robot.name, goal)
+        return None
     _reserve(coordination.connection(), robot, path, radius, now, heeds)  # one transaction, its own entries
     return path
 
@@ -387,7 +387,7 @@ def _search(robot: Robot, passable, start, goal, speed: float, now: float, table
     others' reservations (s); (None, 0.0) when none finds one."""
     radius = reach(robot)
     for pace, window in searches(speed):
-        search = plain.SpaceTimeSearch(passable, radius, pace, pad(now), window_s=window)
+        search = plain.SpaceTimeSearch(passable, radius, pace, pad(now), window_s=window, horizon_s=HORIZON_S)
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
             if window < plain.WINDOW_S:
@@ -422,7 +422,7 @@ def _idle_in_the_way(redis, robot: Robot, through, exact) -> dict[int, plain.Cap
     busy ones and others' goals are not idle (a busy robot standing is reserved for a while, not standing for
     good: obstacles())."""
     asked = {pk for pk, e in _hash(redis, "makeway").items() if not e.get("done") or e["for"] == robot.pk}
-    under = set(_hash(redis, "plans")) | set(_hash(redis, "claims")) | asked
+    under = set(_hash(redis, "plans")) | set(_hash(redis, "claims")) | asked | busy_ids()
     return {
         int(disc.label): disc
         for disc, since in exact
@@ -572,10 +572,10 @@ def searches(speed: float) -> list[tuple[float, float]]:
     heeding them 8 s ahead between, and such plans replanned every 4 s, was tried in run al: where robots
     standing left no way, each replan was four failed searches in the turn, the fleet waited 1,400 s for
     turns against 220 s in run ak, and had 7 deadlocks and 2.94x the longest lone run against 2 and 1.55x.)"""
-    out = [(speed, plain.WINDOW_S)]
+    out = [(speed, math.inf)]
     if speed > SLOW_PLAN_MPS * 1.2:
-        out.append((SLOW_PLAN_MPS, plain.WINDOW_S))
-    return [*out, (speed, 0.0)]
+        out.append((SLOW_PLAN_MPS, math.inf))
+    return out
 
 
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
@@ -647,7 +647,12 @@ def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float, 
     timed = [[round(x, 3), round(y, 3), round(t, 2)] for x, y, t in path]  # its order, for the claims
     with redis.pipeline() as pipe:  # (one transaction: a claim never reads one plan's cells, another's order)
         _put(pipe, "plans", robot.pk, entry)
-        order = {"path": timed, "r": radius, "until": round(now + heeds, 2), "expires": entry["expires"]}
+        order = {
+            "path": timed,
+            "r": radius,
+            "until": round(now + min(heeds, 1e6), 2),
+            "expires": entry["expires"],
+        }
         _put(pipe, "timed", robot.pk, order)
         pipe.execute()
 
@@ -697,7 +702,7 @@ def _claim(pipe, robot: Robot, start, end, radius: float, everyone, planned, why
     blocker = plain.first_in_the_way(tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK)
     if blocker is None and planned is not None and tuple(start) != tuple(end):
         others = _planned(pipe, held)
-        blocker = plain.first_to_pass(tuple(start), tuple(end), *planned, radius, others, STRAY_M, LEG_M)
+        blocker = plain.first_to_pass(tuple(start), tuple(end), *planned, radius, others, -math.inf, LEG_M)
     if blocker is not None:
         pipe.unwatch()
         if why is not None:
@@ -724,6 +729,16 @@ def _planned(redis, held: dict[int, dict]) -> list[plain.Planned]:
             progress = held[pk].get("t", path[0][2])
             out.append(plain.Planned(str(pk), path, entry["r"], progress, entry["until"]))
     return out
+
+
+def _drop_plan(robot: Robot) -> None:
+    """The robot has no plan now (none found): it stands, and the others plan round it and wait for nothing of
+    its old way."""
+    redis = coordination.connection()
+    with redis.pipeline() as pipe:
+        for name in ("plans", "timed"):
+            pipe.hdel(_key(name), str(robot.pk))
+        pipe.execute()
 
 
 def release(robot: Robot, pose) -> None:
@@ -901,7 +916,7 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
     robot = session.robot
     _measure_clock(session)
     around: set[int] = set()
-    reroutes = 0
+    reroutes, settles, stuck_since = 0, 0, None
     here = session.pose()[:2]
     claim(robot, here, here, session.check)  # under traffic from now on: others wait for it, not go round it
     try:
@@ -911,11 +926,21 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
             learned = known_pace(robot.pk) if nav else None
             pace = _pace(limits, factor, nav, learned)
             speed = pace * PLANNED_SPEED * session.link.clock.rate  # m per second of wall time
-            path = plan(robot, pose[:2], spot, speed, around, session.check, replans > 0, may_ask=True)
-            spot = path[-1][:2]
+            settled = replans > 0 and spot != tuple(goal)
+            path = plan(robot, pose[:2], spot, speed, around, session.check, settled, may_ask=True)
+            if path is None:  # it stands (for good, as the others plan) until a way opens
+                _drop_plan(robot)
+                stuck_since = stuck_since or time.monotonic()
+                if time.monotonic() - stuck_since > WAIT_LIMIT_S:
+                    raise StepFailed(f"{robot.name}: no plan to its goal clear of the others")
+                _hold(session, time.time() + PLAN_AGAIN_S)
+                continue
+            stuck_since, spot = None, tuple(path[-1][:2])
             try:
                 _follow(session, path, limits, factor, nav, guessed=nav and learned is None)
-                return _moved(tuple(goal), path[-1][:2])
+                if math.dist(spot, goal) < SETTLE_M or settles >= SETTLE_TRIES:
+                    return _moved(tuple(goal), spot)
+                settles, spot = settles + 1, tuple(goal)  # its goal may be free by now: again
             except Replan:
                 continue
             except Reroute as exc:
@@ -1006,7 +1031,7 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
-    windowed = path[-1][2] - planned > plain.WINDOW_S  # it heeded others only so far: replan before the end
+    windowed = False
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
         begins = due
@@ -1039,8 +1064,6 @@ def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: b
                 )
                 continue
             _note_pace(session, distance, time.monotonic() - sent)
-            if guessed and not last and known_pace(robot.pk) is not None:
-                raise Replan()
         else:
             tolerance = motion.TOLERANCE if last else _tolerance(pose[:2], legs, i)
             controller = motion.GoToGoal(target, limits, factor, tolerance)

@@ -26,7 +26,6 @@ TRAFFIC_CELL = 0.2  # m: the reservation table's grid
 SPOT_MARGIN = 0.3  # m kept between two robots' discs at their goals (more than execution.traffic plans with)
 SPOT_STEP = 0.1  # m between the rings searched for a free spot
 SPOT_SEARCH_M = 4.0  # m: how far from the place a free spot is looked for
-WAIT_S = 0.5  # s: the shortest wait a plan holds (a fast robot's tick is shorter: 0.125 s for a Husky)
 WINDOW_S = 30.0  # s ahead a plan heeds others' reservations (windowed cooperative A*: it is replanned sooner)
 FOREVER = math.inf
 COMPASS = ("east", "north-east", "north", "north-west", "west", "south-west", "south", "south-east")
@@ -277,6 +276,25 @@ class Spans:
         i = bisect.bisect_right(self.ends, lo)  # the first interval still going on after lo
         return i < len(self.ends) and self.starts[i] < hi
 
+    def pairs(self) -> list[tuple[float, float]]:
+        return list(zip(self.starts, self.ends, strict=True))
+
+    def gap_at(self, t: float) -> int | None:
+        """The index of the gap (the free time between two intervals) t lies in; None when t is held. Gap i
+        runs from the end of interval i - 1 to the start of interval i."""
+        i = bisect.bisect_right(self.ends, t)
+        return i if i == len(self.starts) or self.starts[i] > t else None
+
+    def gap_end(self, i: int) -> float:
+        return self.starts[i] if i < len(self.starts) else FOREVER
+
+    def free_from(self, t: float, duration: float) -> float:
+        """The earliest time from t on that begins `duration` seconds free of every interval."""
+        i = bisect.bisect_right(self.ends, t)
+        while i < len(self.starts) and self.starts[i] < t + duration:
+            t, i = self.ends[i], i + 1
+        return t
+
 
 class Busy:
     """When each cell is held by someone (ReservationTable.intervals), and when any of a set of cells is."""
@@ -359,7 +377,6 @@ class Clearance:
 
 SHORTCUT_REACH = 40  # points ahead a straight leg may join (string pulling costs grow with the square)
 MOVES = [(dc, dr, math.hypot(dc, dr)) for dc in (-1, 0, 1) for dr in (-1, 0, 1) if dc or dr]
-STEPS = [*MOVES, (0, 0, 1.0)]  # the moves, and a wait where it stands (WAIT_S, or a tick if longer)
 DETOUR = (1.5, 10)  # the longest detour searched: this many times the shortest way, plus this many cells
 
 
@@ -369,9 +386,13 @@ class SpaceTimeSearch:
 
     passable(cell): the robot may stand there (the map, inflated by its size). speed: m/s it is planned at.
     pad(t): seconds added on both sides of each reserved interval (timing uncertainty grows with time).
-    A state is (cell, time); moves go to the 8 neighbours (a tick each, one cell's travel) or wait WAIT_S
-    where it stands (a tick, if longer), and arrivals at a cell within WAIT_S of each other are one state: a
-    fast robot's short ticks do not multiply the states of its waits. The heuristic is the exact distance on
+    The search runs on safe intervals (SIPP: Phillips and Likhachev 2011, "Safe Interval Path Planning for
+    Dynamic Environments"): a state is a cell and one of its free spells (the time between two reservations
+    of the footprint there), reached as early as it can be; a move goes to a neighbour (a tick, one cell's
+    travel), after waiting where it stands as long as it takes, once for each free spell of the neighbour that
+    the wait can reach. A wait of any length is one state: searches that stepped through time spent their
+    60,000 states waiting where a crowd passes, and the robot then drove a plan blind to the reservations
+    (8 such plans in a 32-robot run, each in a deadlock after). The heuristic is the exact distance on
     the static grid (one Dijkstra from the goal), so the search only explores detours and waits that the
     reservations force. Reservations are heeded window_s ahead (windowed cooperative A*, Silver
     2005): beyond that, timing is too uncertain to plan around, and a search that must thread every far-off
@@ -410,7 +431,6 @@ class SpaceTimeSearch:
         if s not in distance:
             return None
         tick = TRAFFIC_CELL / self.speed
-        wait = max(tick, WAIT_S)  # a wait lasts this long, and arrivals this close at a cell are one state
         offsets = disc_offsets(self.radius)
         near = Clearance(standing, self.radius, self.pad, {s: start, g: goal})
         self._near = near
@@ -420,21 +440,23 @@ class SpaceTimeSearch:
         feet: dict[tuple[Cell, bool], Spans] = {}
 
         def held(c: Cell, own: bool = False) -> Spans:
-            """When others hold some of its footprint at c, cached; own: less the room it stood on at the
-            start (its own until it has left it)."""
+            """When others hold some of its footprint at c, widened by the pad, cached; own: less the room it
+            stood on at the start (its own until it has left it)."""
             if (c, own) not in feet:
                 foot = [(c[0] + dc, c[1] + dr) for dc, dr in offsets]
-                feet[c, own] = busy.union(x for x in foot if not (own and x in mine))
+                spans = busy.union(x for x in foot if not (own and x in mine))
+                feet[c, own] = Spans((a - self.pad(a), b + self.pad(b)) for a, b in spans.pairs())
             return feet[c, own]
 
         squeezed = near.gap(s, t0) < 0  # it starts nearer to a robot standing than it should come
         if not self._passes_those_standing(s, g, distance, near, t0):
             return None
+        first = held(s, True).gap_at(t0)
+        if first is None:
+            return None
         counter = itertools.count()
-        start_state = (s, 0)
-        # Of states as good as each other, the one queued first is expanded first. (Nearest the goal first
-        # expanded 10-40% fewer states; runs al to ao, with it, had 6 or 7 deadlocks against 2 in run ak
-        # without it, perhaps as its plans wait where robots meet rather than where the robot stands.)
+        start_state = (s, first)
+        # Of states as good as each other, the one queued first is expanded first.
         openq = [(distance[s] * tick, next(counter), start_state, t0)]
         parent: dict = {start_state: None}
         times = {start_state: t0}
@@ -444,31 +466,37 @@ class SpaceTimeSearch:
             if expansions % 500 == 499:
                 self._progress()
             _, _, state, t = heapq.heappop(openq)
-            c = state[0]
+            if t > times[state]:
+                continue  # reached earlier since it was queued
+            (c, gap), own = state, state[0] in mine
             self.expanded = expansions + 1
-            if c == g and not held(c).overlaps(t - self.pad(t), FOREVER) and near.stays(c, t):
+            if c == g and not held(c).overlaps(t, FOREVER) and near.stays(c, t):
                 return self._timed(state, parent, times, start, goal, near_term, robot)
-            if t - t0 > self.horizon_s:
-                continue
-            lo, own = t - self.pad(t), c in mine
-            here, ends = held(c, own), {}  # per step's duration: (t1, t1 + pad), worked out once
-            for dc, dr, d in STEPS:
+            until = held(c, own).gap_end(gap)  # it may wait here until then, and must have left by then
+            for dc, dr, d in MOVES:
                 n = (c[0] + dc, c[1] + dr)
                 if n not in distance:
                     continue
-                dt = d * tick if n != c else wait
-                if dt not in ends:
-                    ends[dt] = (t + dt, t + dt + self.pad(t + dt))
-                t1, hi = ends[dt]
-                nxt = (n, round((t1 - t0) / wait))
-                if nxt in parent:  # reached already, as early (the cheap test first)
-                    continue
-                if here.overlaps(lo, hi) or (n != c and held(n, own).overlaps(lo, hi)):
-                    continue
-                if not near.may_move(c, n, t1, loose=squeezed and own):
-                    continue
-                parent[nxt], times[nxt] = state, t1
-                heapq.heappush(openq, (t1 - t0 + distance[n] * tick, next(counter), nxt, t1))
+                dt, entering, there = d * tick, held(n, own), held(n, n in mine)
+                leave = t
+                while True:  # each gap at n it can get to by waiting here for it: a state of its own
+                    leave = there.free_from(entering.free_from(leave, dt), dt)
+                    if entering.overlaps(leave, leave + dt):
+                        continue  # the two views of n differ (leaving its own start): look again
+                    t1 = leave + dt
+                    if t1 > until or t1 - t0 > self.horizon_s:
+                        break
+                    arrival = there.gap_at(t1)
+                    if arrival is None or not near.may_move(c, n, t1, loose=squeezed and own):
+                        break
+                    nxt = (n, arrival)
+                    if t1 < times.get(nxt, FOREVER):
+                        parent[nxt], times[nxt] = (state, leave), t1
+                        heapq.heappush(openq, (t1 - t0 + distance[n] * tick, next(counter), nxt, t1))
+                    leave = there.gap_end(arrival)  # the next gap begins after the next interval
+                    if leave == FOREVER:
+                        break
+                    leave = there.ends[arrival]
         return None
 
     def _distances(self, goal: Cell, start: Cell) -> dict[Cell, float]:
@@ -518,14 +546,24 @@ class SpaceTimeSearch:
         return False
 
     def _timed(self, state, parent, times, start: Point, goal: Point, table, robot):
-        """The timed points of the found path, from the real start to the real goal."""
-        chain = []
+        """The timed points of the found path, from the real start to the real goal: a wait where the robot
+        leaves a cell later than it got there."""
+        s, g = cell_of(start), cell_of(goal)
+
+        def point(c: Cell) -> Point:
+            return start if c == s else goal if c == g else center_of(c)
+
+        points = []
         while state is not None:
-            chain.append(state)
-            state = parent[state]
-        chain.reverse()
-        points = [(*center_of(c), times[st]) for st in chain for c in [st[0]]]
-        points[0] = (start[0], start[1], points[0][2])
+            points.append((*point(state[0]), times[state]))
+            if parent[state] is not None:
+                before, leave = parent[state]
+                if leave > times[before]:
+                    points.append((*point(before[0]), leave))
+                state = before
+            else:
+                state = None
+        points.reverse()
         points[-1] = (goal[0], goal[1], points[-1][2])
         return self._shortcut(simplify(points), table, robot)
 
