@@ -64,6 +64,8 @@ PLAN_MARGIN = 0.1  # m more again when planning round robots that stand (robots 
 CLAIM_TTL_S = 30.0  # a claim its robot no longer renews (a dead worker) lapses after this
 RENEW_BEFORE_S = 20.0  # a waiting robot renews its claim once less than this is left of it
 CLAIM_LIMIT_S = 10.0  # s of claims lost to others' writes (WATCH) before a claim gives up
+SPACING_M = 0.1  # m more on each side in plans and reservations than claims ask (room to be off the line)
+ORDER_ZONE = 0.15  # m more than both reaches within which two plans' passages are ordered (< 2 x SPACING_M)
 HORIZON_S = 900.0  # s: plans heed the others' reservations all the way (no window)
 PLAN_AGAIN_S = 2.0  # s a robot with no plan clear of the others stands before it plans again
 SETTLE_M = 0.05  # m from its goal a robot stopped at a free spot next to it (a robot stood there)...
@@ -200,7 +202,9 @@ def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
         if pk in around or pk not in plans:  # not planned yet: where it stands, for good, as far as we know
             still.append((held, -math.inf))
         else:
-            table.reserve(str(pk), plain.swept_cells(held.a, held.b, held.r), now - 1.0, now + HOLD_S)
+            table.reserve(
+                str(pk), plain.swept_cells(held.a, held.b, held.r + SPACING_M), now - 1.0, now + HOLD_S
+            )
     still.extend(standing(redis, {robot_id, *claims, *plans}))
     return table, still
 
@@ -387,7 +391,9 @@ def _search(robot: Robot, passable, start, goal, speed: float, now: float, table
     others' reservations (s); (None, 0.0) when none finds one."""
     radius = reach(robot)
     for pace, window in searches(speed):
-        search = plain.SpaceTimeSearch(passable, radius, pace, pad(now), window_s=window, horizon_s=HORIZON_S)
+        search = plain.SpaceTimeSearch(
+            passable, radius, pace, pad(now), window_s=window, horizon_s=HORIZON_S, spacing=SPACING_M
+        )
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
             if window < plain.WINDOW_S:
@@ -633,7 +639,7 @@ def _reserve(redis, robot: Robot, path: list[tuple], radius: float, now: float, 
     heeded the others' reservations (`heeds` s ahead: the claims keep its order there, first_to_pass), and its
     route for the map."""
     table = plain.ReservationTable()
-    table.reserve_path(str(robot.pk), path, radius, pad(now))
+    table.reserve_path(str(robot.pk), path, radius + SPACING_M, pad(now))
     busy = table.intervals()  # merged per cell: a few intervals each, not one per stretch that touches it
     cells = [
         [c, r, round(t0, 2), round(t1, 2)]
@@ -702,7 +708,9 @@ def _claim(pipe, robot: Robot, start, end, radius: float, everyone, planned, why
     blocker = plain.first_in_the_way(tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK)
     if blocker is None and planned is not None and tuple(start) != tuple(end):
         others = _planned(pipe, held)
-        blocker = plain.first_to_pass(tuple(start), tuple(end), *planned, radius, others, -math.inf, LEG_M)
+        blocker = plain.first_to_pass(
+            tuple(start), tuple(end), *planned, radius, others, -math.inf, LEG_M, ORDER_ZONE
+        )
     if blocker is not None:
         pipe.unwatch()
         if why is not None:
