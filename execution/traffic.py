@@ -2,22 +2,27 @@
 
 The algorithms are plain (fleetcore.traffic); this module keeps their state in Redis, where every worker sees it:
 
-1. Reserve (plan). When a robot sets off, its route is planned by space-time A* against the paths the other
-   robots have reserved, the cells they hold now and the robots parked (forever, where they stand); its own
-   timed path is then reserved under its id, until its step ends. First come, first reserved (prioritized
-   planning), one plan at a time across the fleet: a newcomer waits or detours, robots under way are never
-   replanned by it. Reservations are heeded WINDOW_S ahead (windowed cooperative A*), so a robot replans from
-   where it is before its window runs out (_replan_now), against what the others reserved meanwhile. Plans
-   are timed at the robot's real pace (its clock's rate; a nav stack's pace as seen), and a robot keeps to its
-   plan's times: it never sets off on a stretch well before the plan says.
+1. Reserve (plan). When a robot sets off, its route is planned by space-time A* on safe intervals against the
+   paths the other robots have reserved, the cells they hold now and the robots standing: every robot not
+   under a plan (parked, or about to set off and not planned yet) stands for good where it is, as far as a
+   plan knows, so no plan ever passes where another robot still stands. Its own timed path is then reserved
+   under its id, until its step ends. First come, first reserved (prioritized planning), one plan at a time
+   across the fleet: a newcomer waits or detours, robots under way are never replanned by it. A plan heeds
+   the reservations all the way to its goal (no window, so nothing of it is blind to the others); where no
+   such plan exists the robot stands and plans again (PLAN_AGAIN_S), never driving a plan blind to them.
+   Plans and reservations keep SPACING_M more on each side than the claims ask, so robots a plan has pass
+   side by side still get their claims when off their plans' lines. Plans are timed at the robot's real pace
+   (its clock's rate; a nav stack's pace as seen), and a robot keeps to its plan's times: it never sets off
+   on a stretch well before the plan says.
 2. Claim (drive). Before each stretch of its route (at most LEG_M) the robot claims the room its footprint
    sweeps there. A claim is refused while another robot holds some of that room or stands in it; the robot
    then waits where it is and says for whom ("waiting for robot3"). Timing never has to be exact: a robot late
    or early against its reservation is held back by the claims, so no two robots are ever given the same room.
    A claim also keeps the plans' order (fleetcore.traffic.first_to_pass): a robot waits where another robot's
-   plan has it first and that one has not got past yet, however late it is, so robots on plans free of
-   conflicts never wait on each other in a cycle (without it, the claims were first come, first served:
-   a robot on time took the room a late one's plan had first, and they met head on: 1 to 11 deadlocks a run).
+   plan has it first (within ORDER_ZONE more than both reaches) and that one has not got past yet, however
+   late it is, with no exception, so robots on plans free of conflicts never wait on each other in a cycle:
+   an action dependency graph (Hoenig et al. 2019). It holds only with all of 1. together: plans that heed
+   everything to the goal, robots not yet planned standing for good, no replan on the way (runs bl to bq).
    A claim is checked and written in one Redis transaction (WATCH on the claims: optimistic, no lock to wait
    for or to lapse), so two robots claiming at the same moment never both get the same room.
 3. Deadlock. Waiting robots note whom they wait for; a cycle of waits (fleetcore.traffic.wait_cycle) is broken
@@ -56,7 +61,6 @@ from robots.models import Robot
 log = logging.getLogger(__name__)
 
 LEG_M = 1.2  # m: the longest stretch claimed at once
-STRAY_M = 0.25  # m: the claims' margin, and how far a robot may be off its plan's line (WAYPOINT_TOLERANCE)
 RESERVE_MARGIN = 0.05  # m added to a robot's reach radius in reservations and claims
 CLAIM_MARGIN = 0.05  # m more kept between two robots' room when claiming (2 x 0.05 + 0.05 < spots' margin)
 APPROACH_SLACK = 0.03  # m a robot already too close may come nearer (a route planned on cells wobbles)
@@ -71,7 +75,6 @@ PLAN_AGAIN_S = 2.0  # s a robot with no plan clear of the others stands before i
 SETTLE_M = 0.05  # m from its goal a robot stopped at a free spot next to it (a robot stood there)...
 SETTLE_TRIES = 2  # ... plans again for the goal, this many times at most (the other may have left)
 HOLD_S = 4.0  # s the cells another robot holds now are reserved for, in a newcomer's plan
-UNPLANNED_HOLD_S = 20.0  # s the same for a robot about to set off that has not planned yet (its turn comes)
 WAIT_LIMIT_S = 120.0  # s a robot waits for cells before its step fails
 REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before going around it
 BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
@@ -85,8 +88,6 @@ PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (
 MAX_REPLANS = (
     80  # plans of one trip: reroutes, and tries every PLAN_AGAIN_S while no plan is clear of the others
 )
-REPLAN_S = plain.WINDOW_S / 2  # s a plan is followed before it is replanned when nobody else plans...
-REPLAN_LAST_S = plain.WINDOW_S * 0.8  # s ... and before it is replanned in any case (_replan_now)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
@@ -113,10 +114,6 @@ END_M = 1.0  # m from its start and its goal a plan may pass where the robot has
 ASIDE_SEARCH_M = 6.0  # m from where it stands a robot making way looks for that spot
 PAD_GROWTH = 0.02  # s of a reservation's slack per second ahead (pad)
 PLANNED_SPEED = 0.8  # of the commanded speed: turns on the spot and ramps make robots slower than their top
-
-
-class Replan(Exception):
-    """The plan's window runs out: plan again from here, against what the others reserved meanwhile."""
 
 
 class Reroute(Exception):
@@ -303,11 +300,13 @@ def planning_turn(robot: Robot, progress=None):
 
 def _plan(
     robot: Robot, start, goal, speed: float, around: set[int], progress, settled: bool, may_ask: bool
-) -> list[tuple]:
+) -> list[tuple] | None:
     """The plan itself: read the table, search (searches(): less demanding each time one finds nothing),
-    reserve. Without a map, or with no plan within the searches' bounds, the map route (or the straight line)
-    is reserved as it is. A plan that finds no way past idle robots parked on the map route, or only a long
-    way round them (_detour), passes where they stand once they have made way, when they may be asked."""
+    reserve; None when no search finds a plan clear of the others (nothing is reserved). Without a map, the
+    straight line is reserved; to a goal off the map's free ground (by a wall, for the map inflated by the
+    robot's size), the map route, as it is (the claims keep it apart). A plan that finds no way past
+    idle robots parked on the map route, or only a long way round them (_detour), passes where they stand
+    once they have made way, when they may be asked."""
     planner, passable = trip_ground(robot, start, goal)
     radius = reach(robot)
     now = time.time()
@@ -319,23 +318,27 @@ def _plan(
         exact, still = still, [(_grown(c, grow), since) for c, since in still]
         goal = free_goal(robot, goal, radius, exact if settled else still, planner, start)
         still = _stoppable(goal, radius, still, exact)
-        if planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
-            path, heeds = _search(robot, passable, start, goal, speed, now, table, still, progress)
-            through = _detour(path, start, goal, planner) if may_ask else None
-            idle = _idle_in_the_way(redis, robot, through, exact) if through else {}
-            if idle:  # the same search with them gone from where they stand after MAKE_WAY_HOLD_S
-                for pk, disc in idle.items():
-                    cells = plain.footprint_cells(disc.a, disc.r)
-                    table.reserve(str(pk), cells, now - 1.0, now + MAKE_WAY_HOLD_S)
-                rest = [(c, since) for c, since in still if int(c.label) not in idle]
-                passing, passing_heeds = _search(
-                    robot, passable, start, goal, speed, now, table, rest, progress
-                )
-                asked = {pk: disc for pk, disc in idle.items() if passing and _passes(passing, disc, radius)}
-                if asked:  # (a plan that went round them all the same asks nobody)
-                    path, heeds = passing, passing_heeds
-                    _request_way(redis, robot, asked, through)
-    if path is None and planner is None:
+        if not planner.free(*planner.to_cell(*goal)):  # the search takes the goal's point to be free ground
+            log.info(
+                "traffic: %s's goal %s is off the free ground: it drives the map route", robot.name, goal
+            )
+            path = _timed([tuple(start), *route.route(robot, tuple(start), tuple(goal))], speed, now)
+            _reserve(redis, robot, path, radius, now, 0.0)
+            return path
+        path, heeds = _search(robot, passable, start, goal, speed, now, table, still, progress)
+        through = _detour(path, start, goal, planner) if may_ask else None
+        idle = _idle_in_the_way(redis, robot, through, exact) if through else {}
+        if idle:  # the same search with them gone from where they stand after MAKE_WAY_HOLD_S
+            for pk, disc in idle.items():
+                cells = plain.footprint_cells(disc.a, disc.r)
+                table.reserve(str(pk), cells, now - 1.0, now + MAKE_WAY_HOLD_S)
+            rest = [(c, since) for c, since in still if int(c.label) not in idle]
+            passing, passing_heeds = _search(robot, passable, start, goal, speed, now, table, rest, progress)
+            asked = {pk: disc for pk, disc in idle.items() if passing and _passes(passing, disc, radius)}
+            if asked:  # (a plan that went round them all the same asks nobody)
+                path, heeds = passing, passing_heeds
+                _request_way(redis, robot, asked, through)
+    if planner is None:  # no map: the straight line, timed, which the claims keep apart
         path, heeds = _timed([tuple(start), tuple(goal)], speed, now), 0.0
     if path is None:
         log.info("traffic: %s has no conflict-free plan to %s; it stands and plans again", robot.name, goal)
@@ -388,21 +391,18 @@ def trip_ground(robot: Robot, start, goal):
 
 def _search(robot: Robot, passable, start, goal, speed: float, now: float, table, still, progress):
     """The first plan of searches() that finds one on these cells (passable), and how far ahead it heeded the
-    others' reservations (s); (None, 0.0) when none finds one."""
+    others' reservations (all the way); (None, 0.0) when none finds one."""
     radius = reach(robot)
-    for pace, window in searches(speed):
+    for pace in searches(speed):
         search = plain.SpaceTimeSearch(
-            passable, radius, pace, pad(now), window_s=window, horizon_s=HORIZON_S, spacing=SPACING_M
+            passable, radius, pace, pad(now), horizon_s=HORIZON_S, spacing=SPACING_M
         )
         path = search.plan(tuple(start), tuple(goal), now, table, str(robot.pk), still, progress)
         if path is not None:
-            if window < plain.WINDOW_S:
-                log.info("traffic: %s heeds only the room held now on its way to %s", robot.name, goal)
-            return path, window
+            return path, math.inf
         log.info(
-            "traffic: %s found no plan to %s heeding %.0f s ahead at %.2f m/s (%d states)",
-            robot.name, goal, window, pace, search.expanded,
-        )  # fmt: skip
+            "traffic: %s found no plan to %s at %.2f m/s (%d states)", robot.name, goal, pace, search.expanded
+        )
     return None, 0.0
 
 
@@ -570,18 +570,12 @@ def made_way(robot: Robot, failed: str = "") -> None:
     _put(redis, "makeway", robot.pk, {**entry, "sent": True, "refused": "", **outcome})
 
 
-def searches(speed: float) -> list[tuple[float, float]]:
-    """(pace, window) of the searches tried in turn until one finds a plan: the robot's pace; a fast robot's
-    again at SLOW_PLAN_MPS (its moves are fewer ticks of search, and it finds plans a fast one does not);
-    then heeding only the room others hold now and the robots standing (a way round
-    robots parked in the way, which the claims keep apart from the others, replanned as it goes). (A search
-    heeding them 8 s ahead between, and such plans replanned every 4 s, was tried in run al: where robots
-    standing left no way, each replan was four failed searches in the turn, the fleet waited 1,400 s for
-    turns against 220 s in run ak, and had 7 deadlocks and 2.94x the longest lone run against 2 and 1.55x.)"""
-    out = [(speed, math.inf)]
-    if speed > SLOW_PLAN_MPS * 1.2:
-        out.append((SLOW_PLAN_MPS, math.inf))
-    return out
+def searches(speed: float) -> list[float]:
+    """The paces of the searches tried in turn until one finds a plan: the robot's; a fast robot's again at
+    SLOW_PLAN_MPS (its moves are fewer ticks of search, and it finds plans a fast one does not). Each heeds
+    the reservations all the way to the goal: a plan blind to them beyond a window (replanned before the
+    window ran out, against robots late on their plans) or as a last resort let the order go round."""
+    return [speed, SLOW_PLAN_MPS] if speed > SLOW_PLAN_MPS * 1.2 else [speed]
 
 
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
@@ -708,9 +702,7 @@ def _claim(pipe, robot: Robot, start, end, radius: float, everyone, planned, why
     blocker = plain.first_in_the_way(tuple(start), tuple(end), radius, others, CLAIM_MARGIN, APPROACH_SLACK)
     if blocker is None and planned is not None and tuple(start) != tuple(end):
         others = _planned(pipe, held)
-        blocker = plain.first_to_pass(
-            tuple(start), tuple(end), *planned, radius, others, -math.inf, LEG_M, ORDER_ZONE
-        )
+        blocker = plain.first_to_pass(tuple(start), tuple(end), *planned, radius, others, ORDER_ZONE)
     if blocker is not None:
         pipe.unwatch()
         if why is not None:
@@ -945,12 +937,10 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
                 continue
             stuck_since, spot = None, tuple(path[-1][:2])
             try:
-                _follow(session, path, limits, factor, nav, guessed=nav and learned is None)
+                _follow(session, path, limits, factor, nav)
                 if math.dist(spot, goal) < SETTLE_M or settles >= SETTLE_TRIES:
                     return _moved(tuple(goal), spot)
                 settles, spot = settles + 1, tuple(goal)  # its goal may be free by now: again
-            except Replan:
-                continue
             except Reroute as exc:
                 reroutes += 1
                 if reroutes > MAX_REROUTES:
@@ -1024,27 +1014,23 @@ def _moved(goal, end) -> str:
     return f" (its spot was taken: it stopped {distance:.1f} m {plain.compass(goal, end)} of it)"
 
 
-def _follow(session: Session, path, limits, factor: float, nav: bool, guessed: bool = False) -> None:
+def _follow(session: Session, path, limits, factor: float, nav: bool) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
-    asked for, or the free spot next to it when that was taken). A plan longer than the window is replanned
-    before its window runs out (_replan_now).
+    asked for, or the free spot next to it when that was taken). The plan is never replanned on the way: the
+    claims keep its order however late the robot runs (a replan would make a new order against robots already
+    late on the old one).
 
     A robot never sets off on a stretch more than EARLY_S before its planned time: the plan is slower than the
     robot (PLANNED_SPEED), and one running ahead of it would meet robots planned to have left by then there. A
-    nav stack drives at a pace of its own, which the plan learns (known_pace); a plan timed at a guess
-    (guessed: the pace was not seen yet) is replanned once the first stretch has shown it. (Nav stacks not
-    held to a guessed pace ran at up to 4.5 times it, early against every reservation on the way: 4 of the
-    5 deadlocks of run t were between them and robots keeping to their plans.)
+    nav stack drives at a pace of its own, which later plans are timed at (known_pace; until it is seen, the
+    robot's speed limit: a stack slower than that is late, which the order allows for).
     A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
     an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
-    windowed = False
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
         begins = due
-        if i and windowed and _replan_now(time.time() - planned):
-            raise Replan()
         live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
         early = time.time() < due - EARLY_S
         if hold or early:  # a planned wait, or early: keep to the plan's times
@@ -1093,15 +1079,6 @@ def _pace(limits: motion.Limits, factor: float, nav: bool, learned: float | None
     if not nav:
         return limits.linear * factor
     return learned or limits.linear
-
-
-def _replan_now(age: float) -> bool:
-    """Whether a windowed plan this old is replanned at this stretch: from REPLAN_S on, when nobody is planning
-    (a replan waits for its turn with the robot standing: in a crowd that was most of the turns' waiting), and
-    in any case once its window has little left (REPLAN_LAST_S)."""
-    if age <= REPLAN_S:
-        return False
-    return age > REPLAN_LAST_S or not coordination.connection().exists(_key("turn"))
 
 
 def _tolerance(here, legs, i: int) -> float:

@@ -26,7 +26,6 @@ TRAFFIC_CELL = 0.2  # m: the reservation table's grid
 SPOT_MARGIN = 0.3  # m kept between two robots' discs at their goals (more than execution.traffic plans with)
 SPOT_STEP = 0.1  # m between the rings searched for a free spot
 SPOT_SEARCH_M = 4.0  # m: how far from the place a free spot is looked for
-WINDOW_S = 30.0  # s ahead a plan heeds others' reservations (windowed cooperative A*: it is replanned sooner)
 FOREVER = math.inf
 COMPASS = ("east", "north-east", "north", "north-west", "west", "south-west", "south", "south-east")
 
@@ -234,15 +233,6 @@ class ReservationTable:
                     return who
         return None
 
-    def window(self, until: float) -> ReservationTable:
-        """The reservations that begin before `until`: what a windowed plan heeds."""
-        near: dict[Cell, list[tuple[float, float, str]]] = {}
-        for c, entries in self.cells.items():
-            kept = [entry for entry in entries if entry[0] < until]
-            if kept:
-                near[c] = kept
-        return ReservationTable(near)
-
     def intervals(self, robot: str = "") -> Busy:
         """Everyone else's reservations merged per cell, for fast look-ups while searching."""
         return Busy(
@@ -406,10 +396,10 @@ class SpaceTimeSearch:
     60,000 states waiting where a crowd passes, and the robot then drove a plan blind to the reservations
     (8 such plans in a 32-robot run, each in a deadlock after). The heuristic is the exact distance on
     the static grid (one Dijkstra from the goal), so the search only explores detours and waits that the
-    reservations force. Reservations are heeded window_s ahead (windowed cooperative A*, Silver
-    2005): beyond that, timing is too uncertain to plan around, and a search that must thread every far-off
-    reservation fails for lack of expansions; the robot replans before its window runs out, and the claims
-    keep it apart from the others meanwhile. Where others will stand for good is always heeded.
+    reservations force. Reservations are heeded all the way to the goal (a windowed search, Silver 2005,
+    left plans blind to the others beyond 30 s, replanned against robots late on theirs: the order kept at
+    run time went round). spacing: metres added to the radius against the reservations only (not against
+    the robots standing), so plans keep more room between robots than the claims ask.
     """
 
     passable: Callable[[Cell], bool]
@@ -418,7 +408,6 @@ class SpaceTimeSearch:
     pad: Callable[[float], float] = lambda t: 0.5
     max_expansions: int = 60_000
     horizon_s: float = 240.0
-    window_s: float = WINDOW_S
     spacing: float = 0.0  # m added to the radius against the reservations (not against robots standing)
     expanded: int = field(default=0, init=False)  # states the last plan() expanded
 
@@ -433,7 +422,7 @@ class SpaceTimeSearch:
         progress: Callable[[], None] | None = None,
     ) -> list[tuple[float, float, float]] | None:
         """A timed path [(x, y, t), ...] from start to goal avoiding the table's reservations at their times
-        (those that begin within the window) and the robots standing, exactly, as discs (each from its time
+        and the robots standing, exactly, as discs (each from its time
         `since` on: a robot parked now has -inf, another's goal the time it arrives there), ending where the
         robot may stay; consecutive equal points are waits. The cells the robot stands on at the start are
         its own until it moves. progress() is called every few hundred steps of work (keep a lock alive,
@@ -447,8 +436,7 @@ class SpaceTimeSearch:
         offsets = disc_offsets(self.radius + self.spacing)
         near = Clearance(standing, self.radius, self.pad, {s: start, g: goal})
         self._near = near
-        near_term = table.window(t0 + self.window_s)
-        busy = near_term.intervals(robot)
+        busy = table.intervals(robot)
         mine = {(s[0] + dc, s[1] + dr) for dc, dr in offsets}
         feet: dict[tuple[Cell, bool], Spans] = {}
 
@@ -484,7 +472,7 @@ class SpaceTimeSearch:
             (c, gap), own = state, state[0] in mine
             self.expanded = expansions + 1
             if c == g and not held(c).overlaps(t, FOREVER) and near.stays(c, t):
-                return self._timed(state, parent, times, start, goal, near_term, robot)
+                return self._timed(state, parent, times, start, goal, table, robot)
             until = held(c, own).gap_end(gap)  # it may wait here until then, and must have left by then
             for dc, dr, d in MOVES:
                 n = (c[0] + dc, c[1] + dr)
@@ -646,8 +634,6 @@ def first_to_pass(
     tb: float,
     radius: float,
     others: Iterable[Planned],
-    margin: float = 0.0,
-    ahead: float = 0.0,
     zone: float = 0.0,
 ):
     """The first of the others whose plan has it near the stretch a -> b (planned from ta to tb) earlier than
@@ -657,57 +643,39 @@ def first_to_pass(
     The plans' order kept at run time, whatever their timing (an action dependency graph: Hoenig et al. 2019,
     "Persistent and robust execution of MAPF schedules in warehouses"). A robot late on its plan keeps its
     turn where its plan had it first, and one on time waits for it there, instead of taking the room first
-    and meeting it head on (robots late or early against their plans met so in the south aisle: run as).
-    Each robot waits only for one planned earlier than itself at the same place, so no wait goes round in a
-    cycle while the plans are free of conflicts. Near: within both radii (the reservations keep them farther
-    apart); compared at the point of the stretch nearest to each point of the other's plan.
-
-    Where the plans are not free of conflicts, the order would go round: so only the part of a plan that
-    heeded the reservations counts (up to `until`: not beyond its window, nothing of a plan blind to them),
-    and the other does not go first if, on its way there or within `ahead` metres after (the stretch it
-    would claim), it comes within reach of `a`, where this robot stands (both radii and `margin`: the
-    claims' margin and how far a robot strays from its plan): it cannot pass there before this one has
-    left, whatever the plans say (a robot's plan may wait on its start past another's planned passage: the
-    cells it stands on are its own until it moves; keeping the order there had cycles, run v)."""
+    and meeting it head on. Each robot waits only for one planned earlier than itself at the same place, so
+    no wait goes round in a cycle while the plans are free of conflicts, with no exception: where the plans
+    are not free of conflicts the order can go round, so only the part of a plan that heeded the
+    reservations counts (up to `until`: nothing of a plan blind to them). Near: within both radii and `zone`
+    (the reservations keep plans farther apart than that, so passages near each other are never at one
+    time); compared at the point of the stretch nearest to each point of the other's plan."""
     for other in others:
-        if _passes_first(a, b, ta, tb, radius, other, margin, ahead, zone):
+        if _passes_first(a, b, ta, tb, radius, other, zone):
             return other.label
     return None
 
 
-def _passes_first(a, b, ta, tb, radius: float, other: Planned, margin: float, ahead: float, zone=0.0) -> bool:
-    near, blocked = radius + other.r + zone, radius + other.r + margin
-    first, driven = None, 0.0  # how far along its plan it first comes near the stretch before this robot
+def _passes_first(a, b, ta, tb, radius: float, other: Planned, zone: float) -> bool:
+    near = radius + other.r + zone
     for p, q in itertools.pairwise([*other.path, other.path[-1]]):  # the last: where it stands, arrived
         if q[2] < other.progress:
             continue
-        length = math.dist(p[:2], q[:2])
-        if first is None and p[2] > other.until:
+        if p[2] > other.until:
             return False  # beyond what it heeded: no turn of its own from here
-        if first is not None and driven > first + ahead:
-            return True
-        if segment_distance(a, a, p[:2], q[:2]) >= blocked and (
-            first is not None or segment_distance(a, b, p[:2], q[:2]) >= near
-        ):  # a leg far from this robot and, till a turn is found, from its stretch: nothing to look at
-            driven += length
-            continue
-        n = max(1, math.ceil(length / PRECEDENCE_STEP))
+        if segment_distance(a, b, p[:2], q[:2]) >= near:
+            continue  # a leg far from the stretch: nothing to look at
+        n = max(1, math.ceil(math.dist(p[:2], q[:2]) / PRECEDENCE_STEP))
         for i in range(n + 1):
             f = i / n
             point, t = (p[0] + (q[0] - p[0]) * f, p[1] + (q[1] - p[1]) * f), p[2] + (q[2] - p[2]) * f
             if t < other.progress and p[:2] != q[:2]:
                 continue  # driven past already (a wait it is in counts: it stands there now)
-            along = driven + length * f
-            if first is not None and along > first + ahead:
+            if t > other.until:
+                return False
+            on = nearest_on(point, a, b)
+            if math.dist(point, on) < near and t < _time_at(on, a, b, ta, tb):
                 return True
-            if math.dist(point, a) < blocked:
-                return False  # it would have to pass where this robot stands: behind it from here
-            if first is None and t <= other.until:
-                on = nearest_on(point, a, b)
-                if math.dist(point, on) < near and t < _time_at(on, a, b, ta, tb):
-                    first = along
-        driven += length
-    return first is not None
+    return False
 
 
 def _time_at(point: Point, a: Point, b: Point, ta: float, tb: float) -> float:

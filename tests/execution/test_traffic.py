@@ -179,23 +179,28 @@ def _slots_on(path, radius: float, cells: set, t0: float, t1: float) -> list:
     ]
 
 
-def test_a_robot_that_has_not_planned_yet_is_passed_as_standing_until_its_turn(robots):
+def test_a_robot_that_has_not_planned_yet_is_gone_round_as_standing_for_good(robots):
+    """b stands on a's line, under traffic, with no plan yet (it waits for its turn): a's plan keeps clear of
+    where b stands for as long as it runs, not only for a while. (A plan passing there later, once b should
+    have left, made b's own plan wait on its start for a to pass, and the order went round.)"""
     a, b = robots["a"], robots["b"]
-    # b stands on a's line, under traffic, with no plan yet (it waits for its turn to plan)
     assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0)) is None
     path = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
-    held = plain.footprint_cells((0.0, -2.0), traffic.reach(b))
-    now = path[0][2]
     assert path[-1][:2] == (4.0, -2.0)
-    assert not _slots_on(path, traffic.reach(a), held, now, now + traffic.UNPLANNED_HOLD_S)
-    assert now + traffic.UNPLANNED_HOLD_S > now + traffic.HOLD_S + 10  # longer than a planned robot's hold
+    closest = min(
+        plain.segment_distance((0.0, -2.0), (0.0, -2.0), p[:2], q[:2]) for p, q in itertools.pairwise(path)
+    )
+    assert closest >= traffic.reach(a) + traffic.reach(b)
 
 
-def test_when_the_reservations_leave_no_plan_the_robot_still_goes_round_the_robots_standing(robots):
-    a, b, c = robots["a"], robots["b"], robots["c"]
+def test_when_the_reservations_leave_no_plan_the_robot_has_none_and_reserves_nothing(robots):
+    """c's plan holds a's goal from a second on for 1,000 s, longer than any search looks ahead: a gets no
+    plan (its travel stands and plans again), not a plan blind to the others (every deadlock of a run
+    followed one such plan), and nothing of it is reserved."""
+    a, c = robots["a"], robots["c"]
     redis, now = traffic.coordination.connection(), time.time()
     goal_cells = plain.footprint_cells((4.0, -2.0), traffic.reach(a) + 0.2)
-    entry = {  # c's plan holds a's goal from a second on, for longer than any search looks ahead
+    entry = {
         "cells": [[col, row, now + 1.0, now + 1000.0] for col, row in goal_cells],
         "goal": [4.0, 4.0],
         "r": traffic.reach(c),
@@ -203,14 +208,33 @@ def test_when_the_reservations_leave_no_plan_the_robot_still_goes_round_the_robo
         "expires": now + 2000.0,
     }
     traffic._put(redis, "plans", c.pk, entry)
-    path = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
-    assert path[-1][:2] == (4.0, -2.0)
-    closest = min(
-        plain.segment_distance((0.0, -2.0), (0.0, -2.0), p[:2], q[:2]) for p, q in itertools.pairwise(path)
-    )
-    # round b, parked on the straight line (the map route, which the planner drove when no search found a plan)
-    assert closest > traffic.reach(a) + traffic.reach(b)
-    assert traffic.searches(0.5)[-1] == (0.5, 0.0)  # it was the last search: only the room held now heeded
+    assert traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5) is None
+    assert a.pk not in traffic._hash(redis, "plans") and a.pk not in traffic._hash(redis, "timed")
+    traffic.release(c, None)
+    assert traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)[-1][:2] == (4.0, -2.0)  # once it has gone
+
+
+def test_plans_keep_more_room_between_robots_than_the_claims_ask(robots):
+    """b crosses a's reserved way: wherever both are at one time, they are farther apart than both reaches
+    and twice SPACING_M (less a cell's diagonal for the grid), so a robot off its plan's line still gets its
+    claims where its plan passes another."""
+    a, b = robots["a"], robots["b"]
+    first = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
+    second = traffic.plan(b, (0.0, -3.5), (0.0, 2.0), 0.5)
+    end = max(first[-1][2], second[-1][2])
+    times = [first[0][2] + i * 0.05 for i in range(int((end - first[0][2]) / 0.05))]
+    closest = min(math.dist(_at(first, t), _at(second, t)) for t in times)
+    assert closest >= traffic.reach(a) + traffic.reach(b) + 2 * traffic.SPACING_M - plain.TRAFFIC_CELL
+
+
+def _at(path, t):
+    if t <= path[0][2]:
+        return path[0][:2]
+    for (x0, y0, t0), (x1, y1, t1) in itertools.pairwise(path):
+        if t0 <= t <= t1:
+            f = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
+            return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
+    return path[-1][:2]
 
 
 def test_a_goal_kept_from_an_earlier_plan_next_to_a_robot_standing_is_reached_by_a_search(robots, caplog):
@@ -289,20 +313,6 @@ def test_a_trip_goes_where_the_robot_can_turn_and_only_near_its_ends_where_it_ca
     assert path[-1][:2] == (14.0, 14.0)
     corners = [p[:2] for p in path[1:-1]]  # where it turns on the spot
     assert corners and all(turning.free(*turning.to_cell(*p)) for p in corners), corners
-
-
-def test_a_windowed_plan_is_replanned_when_nobody_plans_and_before_its_window_runs_out(exec_settings):
-    redis, turn = traffic.coordination.connection(), traffic._key("turn")
-    redis.delete(turn)
-    assert not traffic._replan_now(traffic.REPLAN_S - 1)  # young: followed as it is
-    assert traffic._replan_now(traffic.REPLAN_S + 1)  # due, and the turn is free
-    redis.set(turn, "another robot plans", px=5_000)
-    try:
-        assert not traffic._replan_now(traffic.REPLAN_S + 1)  # it drives on rather than stand in the queue
-        assert traffic._replan_now(traffic.REPLAN_LAST_S + 1)  # its window is nearly out: it waits its turn
-    finally:
-        redis.delete(turn)
-    assert traffic.REPLAN_LAST_S < plain.WINDOW_S
 
 
 def test_a_robot_making_way_stands_clear_of_the_route_it_makes_way_for_as_near_as_it_can(robots):

@@ -115,7 +115,7 @@ def test_a_robot_standing_is_gone_round_and_a_robot_parked_close_may_leave():
     assert squeezed is not None and squeezed[-1][:2] == (0.1, 2.0)
 
 
-def test_nobody_parks_where_another_robot_will_pass_within_the_window():
+def test_nobody_parks_where_another_robot_will_pass():
     table = ReservationTable()
     goal = (0.1, 0.1)
     table.reserve("a", traffic.footprint_cells(goal, 0.15), 20.0, 25.0)  # a passes the goal at t = 20..25
@@ -124,17 +124,16 @@ def test_nobody_parks_where_another_robot_will_pass_within_the_window():
     assert path[-1][2] >= 25.0  # b arrives after a has passed (alone it would be there by t = 5)
 
 
-def test_reservations_beyond_the_window_do_not_hold_a_plan_up():
-    """Windowed cooperative A*: what others reserved further ahead than the window is left to a later plan
-    (and to the claims), so it neither delays this plan nor makes the search fail."""
+def test_reservations_far_ahead_are_heeded_all_the_way():
+    """No window: what another robot reserved long after now still holds a plan up (a plan blind to the
+    others beyond a window let the order kept at run time go round), and is waited out in one state."""
     table = ReservationTable()
     goal = (0.1, 0.1)
-    late = traffic.WINDOW_S + 5.0
-    table.reserve("a", traffic.footprint_cells(goal, 0.15), late, late + 5.0)
-    path = search().plan((-2.0, 0.1), goal, 0.0, table, "b")
-    assert path is not None and path[-1][2] < 10.0  # straight there: 2.1 m at 0.5 m/s
-    table.reserve("a", traffic.footprint_cells((-1.0, 0.1), 0.15), 1.0, 4.0)  # within the window: heeded
-    assert search().plan((-2.0, 0.1), goal, 0.0, table, "b")[-1][2] > path[-1][2]
+    table.reserve("a", traffic.footprint_cells(goal, 0.15), 35.0, 40.0)  # a passes the goal at t = 35..40
+    found = search()
+    path = found.plan((-2.0, 0.1), goal, 0.0, table, "b")
+    assert path is not None and path[-1][2] >= 40.0  # not there by t = 5 to stand in a's way at 35
+    assert found.expanded < 5_000  # (a wait is one state: stepping through time took one per tick and cell)
 
 
 def test_busy_intervals_agree_with_the_table():
@@ -231,24 +230,35 @@ def test_a_robot_late_on_its_plan_keeps_its_turn_where_its_plan_had_it_first():
     assert traffic.first_to_pass((0.0, -3.0), (0.0, -2.0), 2.0, 4.0, 0.2, [late]) is None  # nowhere near
 
 
-def test_a_plan_counts_for_the_order_only_where_it_heeded_the_others_and_up_to_where_this_robot_stands():
-    # (and up to `ahead` metres after its turn: the stretch it would claim there must not reach r either)
-    """o planned blind beyond t = 1 (its window, or no plan heeding the reservations) has no turn at the
-    crossing it reaches at t = 2. o planned through where r stands (at t = 2, r leaving at t = 3: a start's
-    cells are its robot's own until it moves) cannot get there before r leaves: r does not wait for it, even
-    where o's plan has it first after that (the order would go round: run v)."""
+def test_a_plan_counts_for_the_order_only_where_it_heeded_the_others_and_within_its_zone():
+    """o planned blind beyond t = 1 (no plan heeding the reservations) has no turn at the crossing it reaches
+    at t = 2. o passing 0.55 m beside r's stretch, beyond both radii (0.4 m), is not near it; within a zone
+    of 0.2 m more it is, and r lets it pass first: the zone is wider than the claims' margin, so a robot
+    that would come too near for a claim is ordered, and narrower than the plans' spacing, so no two
+    passages within it are ever at one time."""
     crossing = ((0.0, -1.0), (0.0, 1.0), 2.0, 4.0)
     blind = traffic.Planned("o", [(-2.0, 0.0, 0.0), (2.0, 0.0, 4.0)], 0.2, progress=0.0, until=1.0)
     assert traffic.first_to_pass(*crossing, 0.2, [blind]) is None
-    through = [(-2.0, -1.0, 0.0), (0.0, -1.0, 2.0), (0.0, 1.0, 2.5)]  # over r's spot, then up r's way
-    assert traffic.first_to_pass(*crossing, 0.2, [traffic.Planned("o", through, 0.2, 0.0)], 0.05) is None
-    ahead = [(-2.0, 0.5, 0.0), (0.0, 0.5, 2.0), (2.0, 0.5, 4.0)]  # the same, passing only ahead of r
-    assert traffic.first_to_pass(*crossing, 0.2, [traffic.Planned("o", ahead, 0.2, 0.0)], 0.05) == "o"
-    turning = [(-2.0, 0.3, 0.0), (0.0, 0.3, 2.0), (0.0, -0.8, 3.0)]  # ahead of r, then to where r stands
-    o = traffic.Planned("o", turning, 0.2, 0.0)
-    assert traffic.first_to_pass(*crossing, 0.2, [o], 0.05, ahead=0.0) == "o"
-    assert traffic.first_to_pass(*crossing, 0.2, [o], 0.05, ahead=1.0) == "o"  # 1.25 m on, it reaches r
-    assert traffic.first_to_pass(*crossing, 0.2, [o], 0.05, ahead=1.5) is None  # within the stretch it claims
+    beside = traffic.Planned("o", [(0.55, -2.0, 0.0), (0.55, 2.0, 4.0)], 0.2, progress=0.0)
+    assert traffic.first_to_pass(*crossing, 0.2, [beside]) is None
+    assert traffic.first_to_pass(*crossing, 0.2, [beside], zone=0.2) == "o"
+    through = traffic.Planned("o", [(-2.0, -1.0, 0.0), (0.0, -1.0, 2.0), (0.0, 1.0, 2.5)], 0.2, 0.0)
+    assert traffic.first_to_pass(*crossing, 0.2, [through]) == "o"  # no exception where r stands
+
+
+def test_the_cells_of_a_robot_off_its_cells_centre_cover_every_point_of_its_disc():
+    """A robot near a corner of its cell: every point of its disc lies in a cell counted (taken as a disc at
+    the cell's centre, points up to 0.14 m beyond were missed, and plans passed nearer than their radii)."""
+    for point in [(0.01, 0.01), (0.19, 0.02), (0.11, 0.18), (-0.37, 0.55)]:
+        cells = traffic.footprint_cells(point, 0.3)
+        rim = [
+            (point[0] + 0.2999 * math.cos(a), point[1] + 0.2999 * math.sin(a))
+            for a in (i * math.tau / 360 for i in range(360))
+        ]
+        assert all(cell_of(p) in cells for p in rim), point
+        assert (
+            len(cells) <= 25
+        )  # and no more than the cells it reaches (a 3 x 3 block and parts of a 5 x 5 one)
 
 
 def test_no_two_robots_on_conflict_free_plans_each_wait_for_the_other_to_pass_first():
