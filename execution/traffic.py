@@ -731,6 +731,27 @@ def _planned(redis, held: dict[int, dict]) -> list[plain.Planned]:
     return out
 
 
+def _yet_to_pass(robot: Robot, spot) -> bool:
+    """Whether another robot under way has yet to pass near where this one stands (by its plan, from where
+    its claim begins): then this one does not plan again from there (the order would have that one first
+    where it must pass this one), it stays where it is, and that one goes round it as round any robot
+    parked (run br: a robot planning again for its goal, taken before, waited by the order for a Husky
+    that waited for its room)."""
+    redis = coordination.connection()
+    claims, radius = _hash(redis, "claims"), reach(robot)
+    for pk, entry in _hash(redis, "timed").items():
+        if pk == robot.pk or pk not in claims:
+            continue
+        progress, near = (
+            claims[pk].get("t", entry["path"][0][2]),
+            radius + entry["r"] + ORDER_ZONE + CLAIM_MARGIN,
+        )
+        rest = [tuple(claims[pk]["a"]), *(tuple(p[:2]) for p in entry["path"] if p[2] >= progress)]
+        if any(plain.segment_distance(spot, spot, p, q) < near for p, q in itertools.pairwise(rest)):
+            return True
+    return False
+
+
 def _drop_plan(robot: Robot) -> None:
     """The robot has no plan now (none found): it stands, and the others plan round it and wait for nothing of
     its old way."""
@@ -938,7 +959,8 @@ def travel(session: Session, goal, limits: motion.Limits, factor: float, nav: bo
             stuck_since, spot = None, tuple(path[-1][:2])
             try:
                 _follow(session, path, limits, factor, nav)
-                if math.dist(spot, goal) < SETTLE_M or settles >= SETTLE_TRIES:
+                done = math.dist(spot, goal) < SETTLE_M or settles >= SETTLE_TRIES
+                if done or _yet_to_pass(robot, spot):
                     return _moved(tuple(goal), spot)
                 settles, spot = settles + 1, tuple(goal)  # its goal may be free by now: again
             except Reroute as exc:

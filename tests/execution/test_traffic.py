@@ -14,6 +14,7 @@ from fleetcore import motion
 from fleetcore import traffic as plain
 from places.worlds import load_world_into_db
 from robots.models import Robot
+from tests.fleetcore.test_traffic import position
 
 SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
 
@@ -215,26 +216,17 @@ def test_when_the_reservations_leave_no_plan_the_robot_has_none_and_reserves_not
 
 
 def test_plans_keep_more_room_between_robots_than_the_claims_ask(robots):
-    """b crosses a's reserved way: wherever both are at one time, they are farther apart than both reaches
-    and twice SPACING_M (less a cell's diagonal for the grid), so a robot off its plan's line still gets its
-    claims where its plan passes another."""
+    """b drives west 0.55 m beside a's way east, head on: where both are at one time they keep both reaches
+    and SPACING_M on each side apart (0.79 m here; with no spacing the plans passed 0.53 m apart, 0.15 m
+    more than both reaches, where a robot 0.1 m off its line is refused its claim), so robots off their
+    plans' lines still get their claims where their plans pass each other."""
     a, b = robots["a"], robots["b"]
     first = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
-    second = traffic.plan(b, (0.0, -3.5), (0.0, 2.0), 0.5)
+    second = traffic.plan(b, (4.0, -1.45), (-4.0, -1.45), 0.5)
     end = max(first[-1][2], second[-1][2])
     times = [first[0][2] + i * 0.05 for i in range(int((end - first[0][2]) / 0.05))]
-    closest = min(math.dist(_at(first, t), _at(second, t)) for t in times)
-    assert closest >= traffic.reach(a) + traffic.reach(b) + 2 * traffic.SPACING_M - plain.TRAFFIC_CELL
-
-
-def _at(path, t):
-    if t <= path[0][2]:
-        return path[0][:2]
-    for (x0, y0, t0), (x1, y1, t1) in itertools.pairwise(path):
-        if t0 <= t <= t1:
-            f = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
-            return x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
-    return path[-1][:2]
+    closest = min(math.dist(position(first, t), position(second, t)) for t in times)
+    assert closest >= traffic.reach(a) + traffic.reach(b) + 2 * traffic.SPACING_M
 
 
 def test_a_goal_kept_from_an_earlier_plan_next_to_a_robot_standing_is_reached_by_a_search(robots, caplog):
