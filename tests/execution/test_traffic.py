@@ -410,3 +410,18 @@ def test_a_stalled_robot_backs_off_only_into_room_it_has_claimed(robots):
     free = StandingSession(a, (-2.0, 0.0, math.pi))  # heading west, b ahead of it: nobody behind
     back_off(free, limits)
     assert free.sent and all(linear < 0 for linear, _ in free.sent)
+
+
+def test_a_robot_does_not_plan_again_for_its_goal_where_another_has_yet_to_pass(robots):
+    """a, stopped by its goal (taken), would plan again for it from where it stands; b's plan, under way, has
+    yet to pass 0.6 m from there: a stays (b goes round it, as round any robot parked) rather than plan
+    anew from a spot b's earlier plan has it pass first. Once b's claim begins past it, a may plan again."""
+    a, b = robots["a"], robots["b"]
+    spot = (0.0, 0.6)
+    path = traffic.plan(b, (0.0, -2.0), (0.0, 2.0), 0.5)
+    assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0), planned=(path[0][2], path[0][2])) is None
+    assert traffic._yet_to_pass(a, spot)
+    assert not traffic._yet_to_pass(a, (3.0, 0.6))  # nowhere near its way
+    end = path[-1]
+    assert traffic.claim(b, end[:2], end[:2], planned=(end[2], end[2])) is None  # b at its goal: passed
+    assert not traffic._yet_to_pass(a, spot)
