@@ -85,9 +85,7 @@ TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together
 TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
 TURN_POLL_S = 0.05
 PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
-MAX_REPLANS = (
-    80  # plans of one trip: reroutes, and tries every PLAN_AGAIN_S while no plan is clear of the others
-)
+MAX_REPLANS = 80  # plans of one trip: reroutes, and tries while no plan is clear of the others
 REST_M = 0.002  # m between two odometry poses of a robot at rest
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 WAIT_POLL_S = 0.2  # s between a waiting robot's tries
@@ -425,8 +423,8 @@ def _detour(path, start, goal, planner) -> list[tuple[float, float]] | None:
 def _idle_in_the_way(redis, robot: Robot, through, exact) -> dict[int, plain.Capsule]:
     """The robots standing on the map route (within reach of it) that are idle, not asked already, not
     refused lately and not made way for this robot lately: {id: where they stand}. Robots under traffic,
-    busy ones and others' goals are not idle (a busy robot standing is reserved for a while, not standing for
-    good: obstacles())."""
+    busy ones (about to set off: plans go round them, but they are not asked) and others' goals are not
+    idle."""
     asked = {pk for pk, e in _hash(redis, "makeway").items() if not e.get("done") or e["for"] == robot.pk}
     under = set(_hash(redis, "plans")) | set(_hash(redis, "claims")) | asked | busy_ids()
     return {
