@@ -740,10 +740,8 @@ def _yet_to_pass(robot: Robot, spot) -> bool:
     for pk, entry in _hash(redis, "timed").items():
         if pk == robot.pk or pk not in claims:
             continue
-        progress, near = (
-            claims[pk].get("t", entry["path"][0][2]),
-            radius + entry["r"] + ORDER_ZONE + CLAIM_MARGIN,
-        )
+        progress = claims[pk].get("t", entry["path"][0][2])
+        near = radius + entry["r"] + ORDER_ZONE + CLAIM_MARGIN
         rest = [tuple(claims[pk]["a"]), *(tuple(p[:2]) for p in entry["path"] if p[2] >= progress)]
         if any(plain.segment_distance(spot, spot, p, q) < near for p, q in itertools.pairwise(rest)):
             return True
