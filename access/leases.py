@@ -43,6 +43,17 @@ def check_command(user, robot, held_by=_ASK) -> None:
         raise ControlRefused(f"{robot.name} is held by {held_by.username}; ask them to release it.")
 
 
+def check_teleop(user, robot, held_by=_ASK) -> None:
+    """Driving by hand needs the lease (operators, access.roles "control"): a free robot's is taken for the
+    driver on the first command (audited and shown on every page), so nobody else drives it meanwhile; someone
+    else's lease refuses (ControlRefused). Instructions need no lease: they queue and run by the robot's rules."""
+    if held_by is _ASK:
+        held_by = holder(robot)
+    check_command(user, robot, held_by)
+    if held_by is None:
+        take(user, robot)
+
+
 def check_stop(user) -> None:
     """Raise ControlRefused unless the user may stop robots: any operator stops any robot, held or not.
 
@@ -50,6 +61,20 @@ def check_stop(user) -> None:
     """
     if not can_control(user):
         raise ControlRefused(f"{user.username} may only view robots, not command them.")
+
+
+def check_cancel(user, owner, robots, held_by=None) -> None:
+    """Raise ControlRefused unless the user may cancel an instruction of `owner` (None: the system's) that these
+    robots run: viewers never; an operator their own always (a cancel is their own word taken back); another's
+    or the system's as they may command every robot of it (a robot someone else holds is theirs to decide);
+    an admin any. held_by: {robot id: its holder}, if known."""
+    if not can_control(user):
+        raise ControlRefused(f"{user.username} may only view robots, not command them.")
+    if owner == user or can_take_over(user):
+        return
+    holders = held_by if held_by is not None else {lease.robot_id: lease.user for lease in active(robots)}
+    for robot in robots:
+        check_command(user, robot, held_by=holders.get(robot.pk))
 
 
 @transaction.atomic

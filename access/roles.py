@@ -14,6 +14,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import wraps
 
+from django.contrib.auth.models import Group, Permission
+from django.contrib.auth.views import redirect_to_login
+from django.core.exceptions import PermissionDenied
+from django.http import HttpResponseNotAllowed, JsonResponse
+from ninja.errors import HttpError
+from ninja.security import SessionAuth
+
+from audit import records as audit
+
 VIEWER, OPERATOR, ADMIN = "viewer", "operator", "admin"
 ROLES = (VIEWER, OPERATOR, ADMIN)  # in order: each role has every ability of the ones before it
 
@@ -161,8 +170,6 @@ def context_processor(request):
 
 def sync_groups(apps=None):
     """Create the three groups with the permissions the matrix gives them (idempotent)."""
-    from django.contrib.auth.models import Group, Permission
-
     for role, perms in GROUP_PERMS.items():
         group, _ = Group.objects.get_or_create(name=role)
         wanted = []
@@ -177,8 +184,6 @@ def sync_groups(apps=None):
 
 def require(request, ability: str) -> None:
     """Refuse an API call (403) unless the user has the ability."""
-    from ninja.errors import HttpError
-
     if not may(request.user, ability):
         audit_refusal(request, ability)
         raise HttpError(403, refusal(request.user, ability))
@@ -191,16 +196,12 @@ def audit_refusal(request, ability: str) -> None:
     """A refused attempt to change something is audited (who, what, where); refused reads are not."""
     if request.method in SAFE_METHODS:
         return
-    from audit import records as audit
-
     audit.record(request.user, "access.refused", request.path[:255], ability=ability, method=request.method)
 
 
 def _role_auth(ability: str):
     """A django-ninja auth class for one ability, named ``may_<ability>`` so the OpenAPI document lists, per
     operation, which ability it needs (and its security scheme says which roles have it)."""
-    from ninja.security import SessionAuth
-
     if ability not in ABILITIES:
         raise KeyError(f"unknown ability {ability!r}; add it to access.roles.ABILITIES")
 
@@ -255,10 +256,6 @@ def requires(ability: str | None = None, **per_method: str):
     def decorate(view):
         @wraps(view)
         def wrapper(request, *args, **kwargs):
-            from django.contrib.auth.views import redirect_to_login
-            from django.core.exceptions import PermissionDenied
-            from django.http import HttpResponseNotAllowed, JsonResponse
-
             wanted = needs.get(request.method)
             if wanted is None:
                 return HttpResponseNotAllowed(sorted(needs))

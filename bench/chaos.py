@@ -1,11 +1,11 @@
-"""Fault survival: the chaos suite's figures as a result file and the README's table.
+"""Fault survival: the chaos suite's figures as a result file and docs/fault-survival.md's table.
 
     python -m bench.chaos [--out DIR]
 
 runs tests/chaos/test_process_kill.py (a whole `make run` in a folder and on ports of its own; each process
 killed with SIGKILL while the turtlebot drives an instruction, then garbage on its link; judged by its odometry)
-and writes what each fault cost to DIR/chaos.json (bench/results/ by default), then prints the table as README's
-"Fault survival" shows it. The scenarios and their assertions are the tests' own: this only asks them for their
+and writes what each fault cost to DIR/chaos.json (bench/results/ by default), then prints the table as
+docs/fault-survival.md shows it. The scenarios and their assertions are the tests' own: this only asks them for their
 figures (FLEET_CHAOS_OUT) and says whether they held. A few minutes on a 2-core machine.
 """
 
@@ -20,7 +20,7 @@ from pathlib import Path
 
 BASE_DIR = Path(__file__).resolve().parent.parent
 SUITE = "tests/chaos/test_process_kill.py"
-COLUMNS = {  # the README's columns, from the suite's row keys
+COLUMNS = {  # docs/fault-survival.md's columns, from the suite's row keys
     "fault (kill -9)": "fault",
     "robot at rest (s)": "robot at rest (s)",
     "instruction final (s)": "instruction final (s)",
@@ -32,19 +32,24 @@ COLUMNS = {  # the README's columns, from the suite's row keys
 
 def run(out: Path) -> int:
     """The suite, with its figures going to out; pytest's exit status."""
-    env = os.environ | {"FLEET_CHAOS_OUT": str(out)}
+    return run_suite(SUITE, {"FLEET_CHAOS_OUT": str(out)})
+
+
+def run_suite(suite: str, env: dict[str, str]) -> int:
+    """A test module as a bench runs it (make test's wrapper, no plugins that reorder or cache), with env added;
+    pytest's exit status. The module writes its figures where env says."""
     command = [
         sys.executable,
         "-m",
         "fleet.testrun",
-        SUITE,
+        suite,
         "-q",
         "-p",
         "no:randomly",
         "-p",
         "no:cacheprovider",
     ]
-    return subprocess.call(command, cwd=BASE_DIR, env=env)
+    return subprocess.call(command, cwd=BASE_DIR, env=os.environ | env)
 
 
 def table(document: dict) -> str:

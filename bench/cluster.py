@@ -29,11 +29,15 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import multiprocessing
 import os
 import sys
 import time
 from collections import defaultdict
 from pathlib import Path
+
+import psutil
+import websockets
 
 from bench import report as report_file
 from deploy.cluster import Cluster, down, host_pids, reason_unavailable
@@ -54,8 +58,6 @@ GOALS = {  # issue 19, for 1,000 robots
 
 def cpu_seconds() -> dict[str, float]:
     """CPU seconds used so far by every process of each host (the namespace's processes)."""
-    import psutil
-
     used = {}
     for host in ("db", "web1", "web2", "exec1", "exec2", "sim1", "sim2", "links"):
         total = 0.0
@@ -82,8 +84,6 @@ class Reception:
         await asyncio.gather(*(self._follow(url, names, stop) for url, names in self.shards.items()))
 
     async def _follow(self, url: str, names: list[str], stop: asyncio.Event) -> None:
-        import websockets
-
         async with websockets.connect(url, max_size=None) as ws:
             for name in names:
                 message = {"op": "subscribe", "topic": f"/{name}/cmd_vel", "type": "geometry_msgs/Twist"}
@@ -110,8 +110,6 @@ class Reception:
 
 
 async def connect(url: str, cookie: str):
-    import websockets
-
     ws_url = url.replace("http://", "ws://") + "ws/fleet/"
     origin = url.rstrip("/")
     return await websockets.connect(
@@ -222,8 +220,6 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
 
     await turn_all(0.0)  # warm-up: each web host's links and checks for every robot
     await asyncio.sleep(2)
-    import multiprocessing
-
     results, pipe = multiprocessing.Pipe()
     dashboards = multiprocessing.get_context("spawn").Process(
         target=browsers, args=(webs, cookie, clients, len(ids), LIVE_S, pipe), name="dashboards"
@@ -402,10 +398,11 @@ def markdown(summary: dict) -> str:
 
 def plot(summary: dict, path: Path) -> None:
     """The cost curve: command and stop latency (p99) and CPU per robot against the number of robots."""
+    # Deferred: matplotlib takes seconds to import and only the plots need it.
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after use("Agg"): pyplot picks its backend when imported
 
     sizes = summary["sizes"]
     robots = [int(n) for n in sizes]

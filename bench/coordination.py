@@ -20,7 +20,7 @@ so nothing waits for allocation, and the executors themselves fail an instructio
 watchdog would only add the stop of a robot whose worker died.
 
 - contacts: robot-robot contacts counted by the simulator's physics (simworker.physics, a pymunk handler);
-- deadlocks: wait-for cycles the traffic layer found (and broke by rerouting one robot), execution.traffic;
+- deadlocks: wait-for cycles the traffic layer found (and broke by rerouting one robot), execution.traffic_state;
 - completion: the share of robots whose instruction succeeded and that stand within 0.3 m of their goal;
 - makespan: simulated seconds from submitting to the last robot done, against the longest lone run: of each
   model, the robot with the longest planned route runs alone from the same start; the longest of those measured
@@ -46,7 +46,23 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from urllib.parse import urlparse
 
+import django
+import psycopg
+from django.conf import settings
+from django.core.cache import cache
+from django.core.management import call_command
+from django.db import connection, connections
+from django.utils import timezone
+
+import live
 from bench import component
+from fleet.processes import end, fleet_env, start
+from fleetcore.catalog import model
+from fleetcore.interpretation import Interpretation
+from fleetcore.planning import Planner
+from fleetcore.steps import Step
+from fleetcore.world import load_world
+from simworker.testing import WorldProcess
 
 RESULT_FILE = "coordination.json"
 WORKERS = 4  # Celery worker processes running the robots' executors (--workers)
@@ -70,8 +86,6 @@ FLEET_ORDER = ("husky", "tb", "tiago")
 
 def admin(url: str, *statements: str) -> None:
     """Run statements on the PostgreSQL server of url, outside a transaction (as CREATE DATABASE must)."""
-    import psycopg
-
     with psycopg.connect(urlparse(url)._replace(scheme="postgresql").geturl(), autocommit=True) as conn:
         for statement in statements:
             conn.execute(statement)
@@ -108,9 +122,6 @@ def setup_django(database_url: str) -> None:
         FLEET_WORLD=WORLD,
     )
     os.environ.setdefault("DJANGO_SETTINGS_MODULE", "fleet.settings")
-    import django
-    from django.core.management import call_command
-
     django.setup()
     call_command("migrate", verbosity=0)
 
@@ -127,6 +138,7 @@ def worker_command(queue: str, name: str, threads: int) -> list[str]:
 
 def wait_ready(procs: list, names: list[str]) -> None:
     """Wait (bounded) until every worker answers a ping, so that the first run does not time their start."""
+    # Deferred: the Celery app reads settings, which this bench points at its own database first.
     from fleet.celery import app
 
     waiting, deadline = set(names), time.monotonic() + WORKER_START_TIMEOUT
@@ -143,10 +155,6 @@ def wait_ready(procs: list, names: list[str]) -> None:
 def executor_workers(count: int, threads: int) -> Iterator[None]:
     """count Celery worker processes of threads threads each, sharing the bench's database, Redis and keys;
     each ended at the end (SIGTERM to its process group, SIGKILL after fleet.processes.STOP_GRACE_S)."""
-    from django.conf import settings
-
-    from fleet.processes import end, fleet_env, start
-
     queue, env = settings.FLEET_EXECUTE_QUEUE, fleet_env()
     names = [f"{queue}-{i}@{socket.gethostname()}" for i in range(count)]
     procs = []
@@ -174,9 +182,6 @@ def pick(names: list[str], n: int) -> list[str]:
 def crossing_goals(world, names: list[str], rng: random.Random) -> dict[str, tuple[float, float]]:
     """Goals on the far side: the westmost robot gets the eastmost goal, and so on, so the routes cross.
     Goals are free cells for the biggest robot, apart by more than two of its radii."""
-    from fleetcore.catalog import model
-    from fleetcore.planning import Planner
-
     specs = {r.name: r for r in world.robots}
     biggest = max(model(specs[n].model).circumscribed_radius for n in names)
     planner = Planner(world.map, biggest)  # room for the biggest robot to turn on the spot at its goal
@@ -192,6 +197,7 @@ def crossing_goals(world, names: list[str], rng: random.Random) -> dict[str, tup
 
 
 def register(sim) -> dict:
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from places.worlds import load_world_into_db
     from robots.models import Robot
     from robots.registration import register_endpoints
@@ -205,28 +211,28 @@ def register(sim) -> dict:
 
 def reset(sim, robots: dict, names) -> None:
     """Put robots back on their start poses (in the simulator, and in the portal's pose store and traffic)."""
-    from execution import traffic
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
+    from execution import traffic_state
 
     sim.home(names)
     time.sleep(HOME_SETTLE_S)
     for name in names:
-        traffic.release(robots[name], sim.pose(name))
+        traffic_state.release(robots[name], sim.pose(name))
 
 
 def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_s: float) -> dict:
     """Send every robot to its goal at once; wait; measure contacts, deadlocks, completion, makespan."""
-    from django.utils import timezone
-
-    from execution import traffic
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
+    from execution import traffic_fleet, traffic_state
     from execution.instructions import submit
     from execution.models import Instruction
 
-    contacts0, deadlocks0 = sim.contacts(), traffic.deadlocks()
+    contacts0, deadlocks0 = sim.contacts(), traffic_state.deadlocks()
     started, since = time.time(), timezone.now()
     sent = {}
     for name, (x, y) in goals.items():
-        step = {"action": "move", "robots": [name], "destination": {"name": f"G-{name}", "x": x, "y": y}}
-        parse = {"type": "I", "valid": True, "needs_user": False, "steps": [{**step, "speed": SPEED}]}
+        goal = {"name": f"G-{name}", "x": x, "y": y}
+        parse = Interpretation.for_robots([name], "move", "bench: coordination", goal, speed=SPEED)
         sent[name] = submit(f"move {name} to G-{name}", user, parse=parse).pk
     finished: dict[str, float] = {}
     while len(finished) < len(sent) and time.time() - started < limit_s:
@@ -234,7 +240,8 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
             if name not in finished and Instruction.objects.get(pk=pk).is_final:
                 finished[name] = time.time()
         time.sleep(0.2)
-    while traffic.busy_ids() and time.time() - started < limit_s:  # robots that made way on their way back
+    # robots that made way, on their way back
+    while traffic_fleet.busy_ids() and time.time() - started < limit_s:
         time.sleep(0.2)
     settled = time.time()
     rows = {name: Instruction.objects.get(pk=pk) for name, pk in sent.items()}
@@ -248,7 +255,7 @@ def run_together(sim, robots: dict, goals: dict, user, time_scale: float, limit_
     return {
         "robots": len(goals),
         "contacts": sim.contacts() - contacts0,
-        "deadlocks": traffic.deadlocks() - deadlocks0,
+        "deadlocks": traffic_state.deadlocks() - deadlocks0,
         "completion": round(reached / len(goals), 3),
         "makespan_s": round(makespan, 1),
         "failed": {name: row.outcome[-200:] for name, row in rows.items() if row.status != "succeeded"},
@@ -266,6 +273,7 @@ def longest_trips(robots: dict, names: list[str], starts: dict, goals: dict) -> 
     """The robot of each model with the longest planned route from its start (robots of one model drive at one
     speed): the lone runs. A time estimated across models (planned length over the robot's top speed, or its
     nav stack's pace) ranked badly: run o ran three Huskies alone, the quickest robots there are."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution import route
 
     longest: dict[str, tuple[float, str]] = {}
@@ -280,10 +288,8 @@ def longest_trips(robots: dict, names: list[str], starts: dict, goals: dict) -> 
 
 
 def crossing(cfg: dict) -> dict:
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from django.contrib.auth.models import User
-
-    from fleetcore.world import load_world
-    from simworker.testing import WorldProcess
 
     user = User.objects.create_superuser("bench", password="bench-coordination")
     world, rng, out = load_world(WORLD), random.Random(16), {}
@@ -311,13 +317,8 @@ def crossing(cfg: dict) -> dict:
 
 def allocation_ms(rounds: int) -> dict:
     """dispatch.allocate among 1,000 robots (synthetic rows, poses on free cells of the warehouse)."""
-    from django.core.cache import cache
-
-    import live
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution import dispatch
-    from fleetcore.planning import Planner
-    from fleetcore.steps import Step
-    from fleetcore.world import load_world
     from places.worlds import load_world_into_db
     from robots.models import Binding, Robot
 
@@ -384,8 +385,6 @@ def main(argv: list[str] | None = None) -> dict:
     threads = math.ceil(max(cfg["counts"]) / args.workers)  # a thread for every robot driving at once
     with database() as url:
         setup_django(url)
-        from django.db import connection, connections
-
         started = time.time()
         data = {"mode": args.mode}
         with executor_workers(args.workers, threads):

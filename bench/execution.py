@@ -19,7 +19,8 @@ import time
 from bench.typed_stop import typed_stop
 from experiments import paper
 from experiments.probe import Reception
-from experiments.stats import summarize
+from experiments.stats import profile_calls, summarize
+from fleetcore.interpretation import Interpretation
 
 FINAL = {"succeeded", "failed", "cancelled", "refused", "needs_user"}
 LEG_M = 0.8  # every robot's lane legs: equal distances near its start pose (the paper's equal-travel targets)
@@ -34,14 +35,14 @@ def lane(link, k: int) -> dict:
     return {"name": f"{link.name} lane {k}", "x": x + d * math.cos(yaw), "y": y + d * math.sin(yaw)}
 
 
-def lanes_parse(links, k: int, first: int = 1) -> dict:
+def lanes_parse(links, k: int, first: int = 1) -> Interpretation:
     """One instruction: every robot to its lane targets first..first+k-1 in turn (the interpreter's JSON)."""
     steps = [
         {"action": "move", "robots": [link.name], "destination": lane(link, i), "task": None, "speed": None}
         for i in range(first, first + k)
         for link in links
     ]
-    return {"type": "I", "valid": True, "needs_user": False, "question": None, "steps": steps}
+    return Interpretation.direct(steps, "bench: lanes")
 
 
 def limit_s(bench, metres: float, speed: float) -> float:
@@ -51,6 +52,7 @@ def limit_s(bench, metres: float, speed: float) -> float:
 
 async def wait_final(pk: int, timeout: float, clock=time.time):
     """Poll until the instruction is final or `timeout` has passed on `clock` (wall time by default)."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.models import Instruction
 
     deadline = clock() + timeout
@@ -69,9 +71,10 @@ def sim_clock(bench):
 
 
 async def submit_and_wait(
-    bench, text: str, timeout: float, parse: dict | None = None, bail: bool = True, clock=time.time
+    bench, text: str, timeout: float, parse: Interpretation | None = None, bail: bool = True, clock=time.time
 ) -> dict:
     """Submit as the bench user and wait for a final status; return the instruction's timings."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.instructions import submit
 
     instruction = await asyncio.to_thread(submit, text, bench.portal.user, "api", parse)
@@ -100,6 +103,7 @@ async def submit_and_wait(
 
 def set_navigation(links, on: bool) -> None:
     """Bind (or unbind) each robot's move_base action: the engine then navigates (or drives) to goals."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from robots.models import Binding, Robot
 
     for link in links:
@@ -129,11 +133,19 @@ async def lanes_run(bench, links, k: int) -> dict:
         first = pos.get(link.name, 0) + 1
         steps += [(i - first, link, i) for i in range(first, first + k)]
         pos[link.name] = first + k - 1
-    parse = lanes_parse([], 0)
-    parse["steps"] = [
-        {"action": "move", "robots": [link.name], "destination": lane(link, i), "task": None, "speed": None}
-        for _, link, i in sorted(steps, key=lambda s: s[0])
-    ]
+    parse = Interpretation.direct(
+        [
+            {
+                "action": "move",
+                "robots": [link.name],
+                "destination": lane(link, i),
+                "task": None,
+                "speed": None,
+            }
+            for _, link, i in sorted(steps, key=lambda s: s[0])
+        ],
+        "bench: lanes",
+    )
     names = " and ".join(link.name for link in links)
     text = f"move {names} to {' then '.join(f'lane target {j + 1}' for j in range(k))}"
     speed = min(link.max_linear for link in links)
@@ -184,6 +196,7 @@ def _result(title: str, cells: list, bench, **fields) -> dict:
 
 def route_length(name: str, start: tuple[float, float], goal: tuple[float, float]) -> float:
     """The length of the way around the map's walls (what the robot must drive), not the straight line."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.route import route
     from robots.models import Robot
 
@@ -200,6 +213,7 @@ def trial_limit(bench, link, metres: float, nav: bool) -> float:
 
 async def _goal_trial(bench, link, verb: str, goal: tuple, nav: bool) -> bool:
     """One robot to one goal; a trial not finished within its limit fails and the robot is stopped."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.control import stop
 
     name, gx, gy, _task = goal
@@ -280,6 +294,7 @@ def success_why(rates: dict, outcomes: list[dict], time_scale: float) -> str:
 
 async def stop_queued(bench) -> dict:
     """Stop through the portal's WebSocket with ~100 instructions queued: stop issued -> zero Twist received."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.models import Instruction
 
     links = [bench.exec_link(n) for n in ("robot1", "robot2", "robot3", "robot4", "turtlebot")]
@@ -329,8 +344,8 @@ async def stop_queued(bench) -> dict:
 
 def profile_stop(names: list[str], user) -> tuple[float, str]:
     """cProfile execution.control.stop (what the WebSocket stop runs) on idle robots, in this process."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.control import stop
-    from experiments.stats import profile_calls
 
     per_call, body = profile_calls(lambda: stop(names, user, "bench"), 5)
     return (
@@ -356,6 +371,7 @@ def _ms(t, t0):
 
 async def _queue(bench, links, count: int) -> list[int]:
     """Submit `count` one-leg instructions round-robin over the robots (most wait in the robots' queues)."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.instructions import submit
 
     pks = []
@@ -372,6 +388,7 @@ async def _queue(bench, links, count: int) -> list[int]:
 
 
 async def _wait_running(pks, robots: int, timeout: float) -> None:
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.models import Instruction
 
     deadline = time.time() + timeout

@@ -12,7 +12,12 @@ import tempfile
 import time
 from pathlib import Path
 
+import django
+from django.conf import settings
+from django.core.management import call_command
+
 from bench import component
+from interpreter.parser import interpret as parse
 
 RESULT_FILE = "interpreter.json"
 TSV = Path(__file__).resolve().parents[1] / "tests" / "data" / "instructions.tsv"
@@ -31,19 +36,15 @@ def setup_django() -> str:
     os.environ["FLEET_VAR_DIR"] = var_dir
     os.environ.setdefault("DJANGO_SETTINGS_MODULE", "fleet.settings")
     os.environ.pop("DATABASE_URL", None)
-    import django
-    from django.conf import settings
-
     django.setup()
     if not os.environ.get("REDIS_URL"):
         settings.CACHES = {"default": {"BACKEND": "django.core.cache.backends.locmem.LocMemCache"}}
-    from django.core.management import call_command
-
     call_command("migrate", verbosity=0)
     return var_dir
 
 
 def add_fleet() -> None:
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from places.models import Location, Map
     from robots.models import Robot
 
@@ -80,7 +81,7 @@ def main(argv=None) -> dict:
     seconds = 1.0 if args.mode == "quick" else 5.0
     setup_django()
     add_fleet()
-    from interpreter.parser import interpret as parse
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from interpreter.service import interpret, store
 
     start = time.perf_counter()

@@ -9,13 +9,14 @@ import json
 import sys
 import time
 
+import django
+import websockets
+
 from experiments.stats import summarize
 
 
 async def client(url: str, cookie: str, origin: str, samples: list[float], stop: asyncio.Event) -> int:
     """One browser: log in by cookie, read every pushed batch, keep (received - stamped) per pose."""
-    import websockets
-
     frames = 0
     async with websockets.connect(
         url, additional_headers={"Cookie": f"sessionid={cookie}", "Origin": origin}, max_size=None
@@ -50,9 +51,8 @@ async def measure(ws_url: str, cookie: str, origin: str, clients: int, seconds: 
 
 def feed() -> None:
     """The pose feeder: every registered robot's odometry into robots.poses (what `robotlinks` does)."""
-    import django
-
     django.setup()
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from robots.models import Robot
     from robots.poses import PoseHub, follow
 

@@ -13,6 +13,11 @@ import time
 import urllib.request
 from pathlib import Path
 
+import django
+from django.core.management import call_command
+from django.test import Client
+
+from fleet import embedded_redis
 from simworker.testing import free_port
 
 BASE_DIR = Path(__file__).resolve().parent.parent
@@ -34,8 +39,6 @@ class Portal:
     # ----- this process -----
     def setup(self) -> "Portal":
         """Start Redis, point Django at the temp dir, migrate, create the bench user."""
-        from fleet import embedded_redis
-
         redis_url = os.environ.get("BENCH_REDIS_URL")  # e.g. redis://127.0.0.1:6379/13, else a private one
         if not redis_url:
             self.redis = embedded_redis.start(self.socket)
@@ -48,12 +51,9 @@ class Portal:
         }
         os.environ.pop("DATABASE_URL", None)  # always the temp SQLite: never a shared database
         os.environ.update(self.env)
-        import django
-
         django.setup()
-        from django.core.management import call_command
-
         call_command("migrate", "--noinput", verbosity=0)
+        # Deferred: needs the app registry (bench modules are imported before django.setup()).
         from django.contrib.auth.models import User
 
         self.user = User.objects.create_superuser(BENCH_USER, password="bench-password-1")
@@ -65,8 +65,6 @@ class Portal:
 
     def session_cookie(self) -> str:
         """A logged-in session for the bench user, as a browser would hold it."""
-        from django.test import Client
-
         client = Client()
         client.force_login(self.user)
         return client.cookies["sessionid"].value
@@ -134,6 +132,14 @@ class Portal:
         time.sleep(1.0)
         self._check_alive("links")
 
+    def start_scheduler(self) -> None:
+        """The scheduler as `make run` has it: the watchdog of lost executors, time slots, sweeps."""
+        if "scheduler" in self.procs:
+            return
+        self._spawn("scheduler", [sys.executable, "manage.py", "scheduler"])
+        time.sleep(1.0)
+        self._check_alive("scheduler")
+
     def _spawn(self, name: str, cmd: list[str]) -> None:
         log = open(self.tmp / f"{name}.log", "wb")  # noqa: SIM115 - lives as long as the process
         self.procs[name] = subprocess.Popen(
@@ -161,8 +167,6 @@ class Portal:
             except subprocess.TimeoutExpired:
                 proc.kill()
         if self.redis is not None:
-            from fleet import embedded_redis
-
             embedded_redis.stop(self.redis, self.socket)
         if keep:
             print(f"[bench] kept {self.tmp} (web.log, worker.log)", flush=True)

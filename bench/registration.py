@@ -20,7 +20,16 @@ import tempfile
 import time
 from pathlib import Path
 
+import django
+from django.core.management import call_command
+
 from bench import component
+from robots.discovery import discover
+from robots.identify import identify
+from simworker import rosapi
+from simworker.graph import Graph
+from simworker.server import RosbridgeServer
+from simworker.testing import running_world
 
 RESULT_FILE = "registration.json"
 MODES = {"quick": {"repeats": 1, "ident_runs": 20}, "full": {"repeats": 3, "ident_runs": 200}}
@@ -29,15 +38,13 @@ MODES = {"quick": {"repeats": 1, "ident_runs": 20}, "full": {"repeats": 3, "iden
 def setup_django(db_path: str) -> None:
     os.environ["DATABASE_URL"] = f"sqlite:///{db_path}"
     os.environ.setdefault("DJANGO_SETTINGS_MODULE", "fleet.settings")
-    import django
-    from django.core.management import call_command
-
     django.setup()
     call_command("migrate", verbosity=0)
 
 
 def time_registration(url: str, repeats: int) -> tuple[float, float, int]:
     """Median seconds of a first registration and of a re-registration; robots registered."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from robots.models import Robot
     from robots.registration import register_endpoints
 
@@ -57,8 +64,6 @@ def time_registration(url: str, repeats: int) -> tuple[float, float, int]:
 
 
 def registration_times(repeats: int) -> dict:
-    from simworker.testing import running_world
-
     out = {"registration_s": {}, "reregistration_s": {}, "robots": {}}
     cases = [("1", "turtlebot", 0), ("10", "extra", 10), ("100", "extra", 100)]
     for label, key, extra in cases:
@@ -73,10 +78,6 @@ def registration_times(repeats: int) -> dict:
 
 def big_endpoint(topics: int = 1200):
     """A rosbridge endpoint (the simulator's server and rosapi) showing one robot with `topics` topics."""
-    from simworker import rosapi
-    from simworker.graph import Graph
-    from simworker.server import RosbridgeServer
-
     graph = Graph(1, time.time)
     graph.add_subscriber("/base_driver", "/cmd_vel", "geometry_msgs/Twist")
     graph.add_publisher("/base_driver", "/odom", "nav_msgs/Odometry")
@@ -90,9 +91,6 @@ def big_endpoint(topics: int = 1200):
 
 
 async def identification_time(runs: int) -> dict:
-    from robots.discovery import discover
-    from robots.identify import identify
-
     server = big_endpoint()
     await server.start("127.0.0.1")
     try:

@@ -9,6 +9,7 @@ import json
 import sys
 from pathlib import Path
 
+from bench.typed_stop import GOAL_MS, KINDS
 from experiments import paper
 
 RUN_FILE = "run.json"  # the run's mode, when and how long, and its experiments in order
@@ -25,6 +26,8 @@ SUMMARY_KEYS = (
     "success_rate",
     "coordination",
     "allocation_ms_1000",
+    "stop_faults",
+    "cost_ms_per_s_per_robot",
 )
 CROWDS = ("2", "4", "8", "16", "32")  # robots sent at once in the coordination bench
 
@@ -113,6 +116,8 @@ def build_summary(results: dict[str, dict]) -> dict:
             for n in CROWDS
         },
         "allocation_ms_1000": {"p50": None, "p99": None},
+        "stop_faults": None,  # bench/stop_faults.py's table, as it gives it
+        "cost_ms_per_s_per_robot": None,  # bench/cost.py: CPU per robot per second of each process kind
     }
     for result in results.values():
         for key, value in (result.get("summary") or {}).items():
@@ -202,7 +207,7 @@ def _fmt(value, digits: int = 3) -> str:
 
 
 def render_headline(summary: dict) -> str:
-    """The headline table (goals and our numbers), for REPORT.md and the README."""
+    """The headline table (goals and our numbers), for REPORT.md and docs/benchmarks.md."""
     lines = ["| goal | ours | verdict |", "|---|---|---|"]
     for row in goal_rows(summary):
         lines.append(f"| {row['goal']} | {row['shown']} | {row['verdict']} |")
@@ -242,8 +247,6 @@ def _ratio(a, b):
 
 def render_typed_stop(summary: dict, result: dict | None) -> list[str]:
     """A typed stop against the STOP buttons, same run: every kind of stop, with and without an unreachable robot."""
-    from bench.typed_stop import GOAL_MS, KINDS
-
     typed = summary["typed_stop_latency_ms"]
     kinds = (result or {}).get("kinds") or {}
     reachable, unreachable = kinds.get("reachable", {}), kinds.get("unreachable", {})
@@ -391,10 +394,11 @@ def render_markdown(results: dict[str, dict], summary: dict, mode: str, plots: l
 
 def write_plots(results: dict[str, dict], out_dir: Path) -> list[str]:
     """One PNG per paper table we have cells for, plus the series experiments offer; return the file names."""
+    # Deferred: matplotlib takes seconds to import and only the plots need it.
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # after use("Agg"): pyplot picks its backend when imported
 
     names = []
     for table in paper.TABLES.values():

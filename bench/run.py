@@ -16,10 +16,18 @@ import time
 import traceback
 from pathlib import Path
 
-from bench import report
+import websockets
+
+from bench import execution, report
+from bench.hand import hand_register
+from bench.live_staleness import measure
+from bench.portal import Portal
 from experiments.drivers import DirectDriver, PortalDriver, Unavailable
 from experiments.probe import Reception, sim_robot_link, watch_odometry
 from experiments.response import ODOM_WATCH_MAX, command_latency, robots_scale, speed_grid
+from experiments.stats import profile_calls
+from robots.rosbridge import RosbridgeClient
+from simworker.testing import running_world
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MODES = {
@@ -63,6 +71,11 @@ COMPONENTS = {  # bench module (owned by its component's engineer) -> (the JSON 
     "interpreter_throughput": ("interpreter.json", ("interpreter_per_s",)),
     "registration": ("registration.json", ("registration_s", "identification_ms_1200_topics")),
     "coordination": ("coordination.json", ("coordination", "allocation_ms_1000")),
+    "stop_faults": (
+        "stop_faults.json",
+        ("stop_faults",),
+    ),  # a person's stop under Redis, database, link faults
+    "cost": ("cost.json", ("cost_ms_per_s_per_robot",)),  # CPU per robot per second of each process kind
 }
 COMPONENT_TIMEOUTS = {"coordination": {"quick": 900, "full": 3600}}  # s: robots drive there in simulated time
 
@@ -87,8 +100,6 @@ class Bench:
         self.outcomes: list[dict] = []
 
     async def client(self, url: str):
-        from robots.rosbridge import RosbridgeClient
-
         if url not in self.clients:
             self.clients[url] = RosbridgeClient(url, ping_interval=None)
             await self.clients[url].connect()
@@ -222,8 +233,6 @@ class Bench:
 
     async def portal_driver(self, links) -> PortalDriver:
         """The portal's teleop over /ws/fleet/, robots registered by hand (no identification)."""
-        import websockets
-
         ids = await asyncio.to_thread(hand_register, links)
         self.portal.start_web()
         self.portal.start_worker()
@@ -254,8 +263,6 @@ class Bench:
         )
 
     async def staleness(self) -> dict:
-        from bench.live_staleness import measure
-
         n = self.cfg["stale_robots"]
         links = await self.links(self.fleet_names(n), watch=0)
         if len(links) < n:
@@ -331,9 +338,6 @@ class Bench:
 
     async def needs_execution(self, name: str) -> dict:
         """Run an execution experiment on its own small world (the paper's robots, maybe faster than real)."""
-        from bench import execution
-        from simworker.testing import running_world
-
         if self.exec_sim is None:
             self.exec_sim = self.stack.enter_context(
                 running_world(
@@ -355,8 +359,8 @@ class Bench:
 
 def profile_teleop(name: str, user, calls: int = 200) -> tuple[float, str]:
     """cProfile a press's checks (execution.control.teleop_grant), what the portal runs once per press."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from execution.control import teleop_grant
-    from experiments.stats import profile_calls
 
     per_call, body = profile_calls(lambda: teleop_grant(name, user), calls)
     return (
@@ -378,8 +382,8 @@ def latency_why(portal: dict, per_call_ms: float | None) -> str:
         "(fleet/held_teleop.py), the grants re-checked in one batched query every 0.5 s. What remains is the "
         "per-message work of one ASGI process (frame and JSON decode, channels dispatch, the publish, the reply) "
         "on a 2-core machine that also runs the 200-robot simulator and the bench, and pauses of that process "
-        "(a garbage collection, a burst of first presses checked in threads). Several ASGI processes (README, "
-        "Running at scale) or one socket per operator spread the load."
+        "(a garbage collection, a burst of first presses checked in threads). Several ASGI processes (docs/scale.md) "
+        "or one socket per operator spread the load."
     )
 
 
@@ -401,49 +405,8 @@ def _scale_series(points: list[dict], label: str, file: str) -> dict:
     }
 
 
-def hand_register(links) -> dict[str, int]:
-    """Robots entered by a person (the paper's experiment 2): no discovery, the known topics bound by hand."""
-    from robots.models import Binding, Robot
-
-    ids = {}
-    for link in links:
-        pose = list(link.start)
-        robot, _ = Robot.objects.update_or_create(
-            name=link.name,
-            defaults={
-                "endpoint": link.url,
-                "namespace": _namespace(link),
-                "max_linear": link.max_linear,
-                "max_angular": link.max_angular,
-                "start_pose": pose,
-                "link_status": Robot.Link.ONLINE,
-                "state": Robot.State.READY,
-            },
-        )
-        for action, target, type_ in (
-            ("move", link.cmd_topic, "geometry_msgs/Twist"),
-            ("odometry", link.odom_topic, "nav_msgs/Odometry"),
-        ):
-            Binding.objects.update_or_create(
-                robot=robot,
-                action=action,
-                defaults={
-                    "target": target,
-                    "message_type": type_,
-                    "how": Binding.How.USER,
-                    "confidence": 1.0,
-                },
-            )
-        ids[link.name] = robot.pk
-    return ids
-
-
-def _namespace(link) -> str:
-    parts = link.cmd_topic.strip("/").split("/")
-    return f"/{parts[0]}" if parts[0].startswith("robot") else ""
-
-
 def auto_register(urls: list[str]):
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from robots.registration import register_endpoints
 
     return register_endpoints(urls)
@@ -485,8 +448,6 @@ def _component_result(path: Path, title: str, keys, proc) -> dict:
 
 
 async def bench_async(mode: str, portal, only: set[str] | None = None) -> dict:
-    from simworker.testing import running_world
-
     with running_world("paper", extra=MODES[mode]["extra"]) as sim:
         bench = Bench(mode, sim, portal)
         await bench.run_all(only)
@@ -504,8 +465,6 @@ def run_fleet(
     keep: bool = False,
 ) -> dict:
     """Set the private portal up (synchronously: Django's ORM refuses an event loop), then run the bench."""
-    from bench.portal import Portal
-
     portal = Portal()
     try:
         portal.setup()

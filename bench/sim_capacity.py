@@ -16,13 +16,18 @@ import argparse
 import asyncio
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 
+from websockets.asyncio.client import connect
+
 from bench import component
+from fleetcore.world import load_world
+from simworker.fleet import SimFleet
 
 RESULT_FILE = "sim_capacity.json"
 FULL_SIZES = [100, 250, 400, 500, 600, 700, 800, 1000]
@@ -33,11 +38,6 @@ MAX_LAG = 0.1  # seconds a step may start late (5 steps) before the size counts 
 
 def serve(n: int) -> None:
     """Child mode: run N extra robots, print the URL, then stats once a second until SIGTERM."""
-    import signal
-
-    from fleetcore.world import load_world
-    from simworker.fleet import SimFleet
-
     world = load_world("paper")
     world.extra["spacing"] = 0.3 if n > 500 else 0.45
     fleet = SimFleet(world, extra=n, endpoints=["extra"])
@@ -73,8 +73,6 @@ def serve(n: int) -> None:
 
 async def drive_and_count(url: str, n: int, warmup: float, window: float) -> dict:
     """Subscribe to every robot's odometry and keep them moving; count odometry during the window."""
-    from websockets.asyncio.client import connect
-
     names = [f"/robot{5 + i}" for i in range(n)]
     async with connect(url, max_size=None, max_queue=None) as ws:
         for ns in names:

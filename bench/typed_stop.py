@@ -30,8 +30,11 @@ from collections import Counter
 from dataclasses import dataclass, field
 from http.cookies import SimpleCookie
 
+import live
+from bench.hand import hand_register
 from experiments.probe import Reception, RobotLink
 from experiments.stats import summarize
+from fleetcore.interpretation import Interpretation
 
 ROBOTS = ("robot1", "robot2", "robot3", "robot4", "turtlebot", "husky", "tiago", "robot5", "robot6", "robot7")
 GHOST = "unreachable1"  # the extra robot whose endpoint never answers
@@ -142,7 +145,7 @@ class SilentEndpoint:
             await asyncio.wait_for(self.server.wait_closed(), 5.0)
 
 
-def rotate_parse(name: str) -> dict:
+def rotate_parse(name: str) -> Interpretation:
     """One robot turning on the spot TURNS times (the interpreter's JSON for "rotate <name> 50 times")."""
     step = {
         "action": "rotate",
@@ -151,7 +154,7 @@ def rotate_parse(name: str) -> dict:
         "task": f"rotate({TURNS})",
         "speed": None,
     }
-    return {"type": "I", "valid": True, "needs_user": False, "question": None, "steps": [step]}
+    return Interpretation.direct([step], "bench: typed stop")
 
 
 def moving_between(reception: Reception, link: RobotLink, since: float, until: float) -> bool:
@@ -218,6 +221,7 @@ class TypedStop:
 
     async def start_moving(self) -> None:
         """Every robot turning on the spot (one instruction each); wait until each endpoint gets the commands."""
+        # Deferred: needs the app registry (bench modules are imported before django.setup()).
         from execution.instructions import submit
 
         since = time.time()
@@ -302,6 +306,7 @@ TRIALS = {
 def forget_others(urls) -> int:
     """Unregister the robots on endpoints this world does not serve (the big world's, stopped by now): "stop"
     means every registered robot, and this experiment has exactly ten, plus one unreachable where it says so."""
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from robots.models import Robot
 
     _, deleted = Robot.objects.exclude(endpoint__in=list(urls)).delete()
@@ -311,12 +316,11 @@ def forget_others(urls) -> int:
 def announce(names: list[str]) -> None:
     """Say the robots were registered, as the portal's registration does: the web process reloads its stop
     targets at once (hand registration in this process would otherwise reach it only after RELOAD_S)."""
-    import live
-
     live.registration("bench", "done", robots=names, ok=True)
 
 
 def unregister(name: str) -> None:
+    # Deferred: needs the app registry (bench modules are imported before django.setup()).
     from robots.models import Robot
 
     Robot.objects.filter(name=name).delete()
@@ -324,8 +328,6 @@ def unregister(name: str) -> None:
 
 async def typed_stop(bench) -> dict:
     """Typed stop with ten robots moving, against the buttons; then with an unreachable robot registered."""
-    from bench.run import hand_register
-
     trials = bench.cfg["typed_stop_trials"]
     load = [os.getloadavg()[0]]
     links = [bench.exec_link(name) for name in ROBOTS]

@@ -35,6 +35,7 @@ import os
 import secrets
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -172,7 +173,7 @@ class Cluster:
         for host in ("web1", "web2"):
             web = ["--host", address(host), "--port", str(WEB_PORT), "--log-level", "warning"]
             listed.append(
-                Role(host, "web", [py, "-m", "uvicorn", "fleet.asgi:application", *web, "--proxy-headers"])
+                Role(host, "web", [py, "-m", "uvicorn", "fleet.asgi:application", *web, "--no-proxy-headers"])
             )
         for host in ("exec1", "exec2"):
             instructions = ["-n", f"instructions@{host}", "-Q", "instructions", "-P", "threads"]
@@ -358,8 +359,6 @@ def down(root: Path = DEFAULT_DIR, say=print) -> None:
 
 # ----- waiting -----
 def port_open(host: str, port: int) -> bool:
-    import socket
-
     try:
         with socket.create_connection((host, port), timeout=1):
             return True

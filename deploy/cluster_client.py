@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass
 
 import requests
+import websockets
 
 from deploy.cluster import ADMIN_PASSWORD
 
@@ -118,8 +119,6 @@ class Odometry:
 
     async def _follow(self, url: str, names: list[str]) -> None:
         """Subscribe to the robots' odometry; again whenever the shard comes back."""
-        import websockets
-
         while True:
             try:
                 async with websockets.connect(url, max_size=None, open_timeout=3) as ws:

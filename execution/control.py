@@ -1,8 +1,10 @@
 """Direct control: stop and teleoperation, published from the calling process, bypassing every queue.
 
-stop() raises the robots' stop flags (running executions see them on their next control tick), publishes a
-zero velocity on each robot's move topic at once and cancels its ROS 1 navigation goal (ROS 2 goals are
-cancelled by their runner on its next tick), and cancels the robots' queued executions.
+stop() publishes a zero velocity on each robot's move topic at once and cancels its navigation goal
+(robots/commands.py CommandSurface.zero: move_base's cancel topic, nav2's cancel_goal service), then raises the robots' stop flags (running executions
+see them on their next control tick), cancels the robots' queued executions and, for a person's stop, holds the
+robots (access.holds: nothing automatic moves them until a person releases them); a failure of that bookkeeping
+is said in its results, never raised.
 """
 
 from __future__ import annotations
@@ -16,16 +18,19 @@ from django.core.cache import cache
 from django.utils import timezone
 
 import alerts
-from access import leases
+from access import holds, leases
 from access.leases import ControlRefused, check_stop
 from audit import records as audit
 from execution import coordination
+from execution.bookkeeping import brief_lock_wait
 from execution.link import LinkError, publish_zero
 from execution.models import Execution
 from execution.runner import settle
-from fleetcore import motion
+from fleetcore import faults, motion
 from robots.commands import CommandSurface, surfaces
 from robots.models import Robot
+from robots.rosbridge import pool as links
+from robots.rosbridge import sync
 
 log = logging.getLogger(__name__)
 
@@ -46,20 +51,76 @@ def _robots(robots) -> list[Robot]:
     return found
 
 
-def stop(robots, user, source: str = "console") -> dict[str, str]:
-    """Stop these robots now; return {robot name: "stopped" or the reason it could not be reached}."""
+class StopResults(dict):
+    """{robot name: "stopped" or why it was not reached}, and what of the stop's bookkeeping failed afterwards
+    (`unrecorded`: "Redis refuses writes ...", "the database is locked ..."), for the answer to say."""
+
+    def __init__(self, results) -> None:
+        super().__init__(results)
+        self.failed: dict[str, str] = {}  # store ("Redis", "the database") -> what went wrong, in words
+
+    @property
+    def unrecorded(self) -> list[str]:
+        return list(dict.fromkeys(self.failed.values()))
+
+    def note(self) -> str:
+        """What the answer adds when some bookkeeping failed ("Could not record it: ..."); "" otherwise."""
+        return f" Could not record it: {'; '.join(self.unrecorded)}." if self.failed else ""
+
+
+def stop(robots, user, source: str = "console", database_fault: str | None = None) -> StopResults:
+    """Stop these robots now; return {robot name: "stopped" or the reason it could not be reached}.
+
+    The zeros go first, each robot's on its own; then the flags (Redis), the queued executions, the audit and
+    the alert, each of which may fail (a Redis frozen or refusing writes, a locked database) without undoing the
+    stop: what failed is logged and listed in the results' `unrecorded`, and once a store failed the rest of its
+    bookkeeping is skipped. database_fault: the words of a database failure the caller already met (skipped).
+    """
     robots = _robots(robots)
     if user is not None:
         check_stop(user)  # held robots too: a lease never blocks a stop
-    coordination.request_stop([robot.pk for robot in robots])
     with ThreadPoolExecutor(max_workers=min(8, max(1, len(robots)))) as pool:
-        results = dict(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
-    cancel_waiting(robots, "stopped")
-    audit.record(user, "stop", ", ".join(r.name for r in robots)[:255], source=source, results=results)
-    if robots and len({robot.pk for robot in robots}) == Robot.objects.count():
-        who = getattr(user, "username", None) or "the system"
-        alerts.raise_alert("emergency_stop", None, f"a stop of every robot, by {who} ({source})")
+        results = StopResults(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
+    if database_fault:
+        results.failed["the database"] = database_fault
+    with brief_lock_wait():
+        _bookkeeping(results, robots, user, source)
     return results
+
+
+def _bookkeeping(results: StopResults, robots: list[Robot], user, source: str) -> None:
+    """What a stop records after its zeros: the flags, the queued executions cancelled, the hold, the audit, the
+    alert."""
+    ids = [robot.pk for robot in robots]
+    _record(results, "Redis", coordination.request_stop, ids)
+    _record(results, "the database", cancel_waiting, robots, "stopped")
+    if user is not None:  # a person's stop holds: nothing automatic moves these robots until a person says so
+        _record(results, "the database", holds.hold, robots, user)
+    names = ", ".join(r.name for r in robots)[:255]
+    _record(results, "the database", audit.record, user, "stop", names, source=source, results=dict(results))
+    if robots and _record(results, "the database", lambda: len(set(ids)) == Robot.objects.count()):
+        _record(results, "the database", _raise_emergency_stop, user, source)
+
+
+def _raise_emergency_stop(user, source: str) -> None:
+    """Each stop of every robot is its own event, with its own time and person: its own alert (a later stop
+    does not rewrite an earlier one's words under its first time)."""
+    who = getattr(user, "username", None) or "the system"
+    message = f"a stop of every robot, by {who} ({source})"
+    alerts.raise_alert("emergency_stop", None, message, event=f"stop at {timezone.now().isoformat()}")
+
+
+def _record(stop_results: StopResults, store: str, action, *args, **kwargs):
+    """Run one piece of a stop's bookkeeping unless its store already failed in this stop; a failure is logged
+    and noted in results, never raised."""
+    if store in stop_results.failed:
+        return None
+    try:
+        return action(*args, **kwargs)
+    except Exception as exc:
+        log.warning("stop: %s failed after the zeros: %r", getattr(action, "__name__", action), exc)
+        stop_results.failed[store] = faults.in_words(exc, store)
+        return None
 
 
 def _publish_zero(robot: Robot) -> str:
@@ -162,8 +223,19 @@ def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
         elif not commands[pk].can_move:
             out[pk] = LinkError(f"{robot.name}: no move topic is bound")
         else:
-            out[pk] = TeleopGrant(commands[pk], robot.max_linear, robot.max_angular, expires)
+            out[pk] = _leased(user, robot, held.get(pk)) or TeleopGrant(
+                commands[pk], robot.max_linear, robot.max_angular, expires
+            )
     return out
+
+
+def _leased(user, robot, held_by) -> ControlRefused | None:
+    """Take a free robot's lease for its driver (access.leases.check_teleop); the refusal if it went meanwhile."""
+    try:
+        leases.check_teleop(user, robot, held_by=held_by)
+    except ControlRefused as exc:
+        return exc
+    return None
 
 
 def teleop_grant(robot, user) -> TeleopGrant:
@@ -177,11 +249,9 @@ def teleop_grant(robot, user) -> TeleopGrant:
 
 def teleop_with(grant: TeleopGrant, user, linear: float, angular: float) -> tuple[float, float]:
     """Publish one velocity command under a grant, within the robot's limits; return what was sent."""
-    from robots.rosbridge.sync import get_client
-
     v, w = grant.clamp(linear, angular)
     try:
-        client = get_client(grant.endpoint)
+        client = sync.get_client(grant.endpoint)
     except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the person
         raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc
     client.publish(*grant.publish(v, w))
@@ -194,11 +264,9 @@ async def publish_teleop(grant: TeleopGrant, linear: float, angular: float) -> t
 
     The caller audits changes (audit_teleops, from a thread); a held button's repeats need no audit.
     """
-    from robots.rosbridge import pool
-
     v, w = grant.clamp(linear, angular)
     try:
-        client = await pool.client(grant.endpoint)
+        client = await links.client(grant.endpoint)
         await client.publish(*grant.publish(v, w))
     except Exception as exc:  # the link is down or went down: a one-line reason for the person
         raise LinkError(f"{grant.robot_name}: cannot reach {grant.endpoint}: {exc}") from exc

@@ -7,12 +7,14 @@
   watchdog (execution/watchdog.py, every WATCHDOG_S) then stops the robot.
 - A stop flag holds the time of the last stop of a robot; a runner stops when it is newer than its start.
 - A preempt flag names the Execution that interrupts the robot's current one.
+- A cancel flag holds who cancelled one Execution (one instruction cancelled); its runner stops it.
 
 Keys live under FLEET_EXEC_KEY_PREFIX, so test runs sharing one Redis do not meet.
 """
 
 from __future__ import annotations
 
+import asyncio
 import functools
 import logging
 import os
@@ -23,13 +25,20 @@ import uuid
 import weakref
 
 import redis
+import redis.asyncio
 from django.conf import settings
+from redis.asyncio.retry import Retry as AsyncRetry
+from redis.backoff import NoBackoff
+from redis.retry import Retry
+
+from fleetcore import faults
 
 LOCK_TTL_MS = 1000  # a dead executor's robot is found within this plus one watchdog period (under 2 s)
 HEARTBEAT_S = 0.25  # between renewals: three may be late before the lock lapses
 LIVELY_S = 5.0  # a command loop that has not beaten for this long is hung: the heartbeat stops renewing
 WATCHDOG_S = 0.25  # the scheduler process looks for lapsed locks this often
 STOP_FLAG_TTL_S = 600
+STOP_REDIS_TIMEOUT_S = 0.25  # a stop's flags wait this long at most: a frozen Redis delays no answer by more
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +57,23 @@ def _connection(pid: int, url: str) -> redis.Redis:
 def connection() -> redis.Redis:
     """This process's Redis client (a new one after a fork)."""
     return _connection(os.getpid(), settings.REDIS_URL)
+
+
+@functools.cache
+def _stop_connection(pid: int, url: str) -> redis.Redis:
+    limit = STOP_REDIS_TIMEOUT_S
+    return redis.Redis.from_url(url, socket_timeout=limit, socket_connect_timeout=limit, retry=_no_retry())
+
+
+def _no_retry(on_loop: bool = False):
+    """One attempt: a stop does not wait for a Redis that does not answer at once."""
+    return (AsyncRetry if on_loop else Retry)(NoBackoff(), 0)
+
+
+def stop_connection() -> redis.Redis:
+    """The client a stop's flags go through: short timeouts and no retries, so a frozen Redis costs a stop
+    STOP_REDIS_TIMEOUT_S at most (the zeros are already out; the stop's answer says the flags were not raised)."""
+    return _stop_connection(os.getpid(), settings.REDIS_URL)
 
 
 def key(*parts) -> str:
@@ -93,6 +119,7 @@ class Heartbeat:
         self.lock, self.every, self.lively = lock, every, lively
         self.renewed = self.alive_until = 0.0
         self.lost = self.quiet = False
+        self.fault: str | None = None  # why Redis refused a renewal's write (a full disk), in words
         self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"heartbeat {lock.key}", daemon=True)
 
@@ -114,6 +141,8 @@ class Heartbeat:
     @property
     def why_lost(self) -> str:
         """Why the lock is not ours, in a person's words (for the execution's outcome)."""
+        if self.fault:
+            return f"{self.fault}, so its lock on the robot could not be kept"
         if self.lost:
             return "its lock on the robot lapsed before it was renewed (it is not ours any more)"
         if self.quiet:
@@ -140,18 +169,13 @@ class Heartbeat:
                 renewed = self.lock.renew()
             except Exception as exc:  # Redis away: try again; `held` turns false once the lock has lapsed
                 log.warning("%s: heartbeat not renewed: %s", self.lock.key, exc)
+                self.fault = faults.refusal(exc) or self.fault
                 continue
             if not renewed:
                 log.warning("%s: lost, %.1f s after its last renewal", self.lock.key, sent - self.renewed)
                 self.lost = True  # expired and taken, or released: never ours again
                 return
             self.renewed = sent
-
-
-def lock_holder(robot_id: int) -> str | None:
-    """The token holding a robot's lock now, or None."""
-    value = connection().get(key("lock", robot_id))
-    return value.decode() if value else None
 
 
 def lock_holders(robot_ids) -> dict[int, str | None]:
@@ -164,33 +188,40 @@ def lock_holders(robot_ids) -> dict[int, str | None]:
 
 
 def request_stop(robot_ids) -> float:
-    """Raise the stop flag of these robots (one round trip) and return its time."""
+    """Raise the stop flag of these robots (one round trip, bounded) and return its time; redis errors raise."""
     now = time.time()
-    pipe = connection().pipeline(transaction=False)
+    pipe = stop_connection().pipeline(transaction=False)
     for robot_id in robot_ids:
         pipe.set(key("stop", robot_id), repr(now), ex=STOP_FLAG_TTL_S)
     pipe.execute()
     return now
 
 
-_ASYNC: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> redis.asyncio client
+_ASYNC: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> {url: redis.asyncio client}
 
 
 async def arequest_stop(robot_ids) -> float:
-    """request_stop for code on an event loop: the same flags, over this loop's own Redis connection."""
-    import asyncio
-
-    import redis.asyncio
-
-    loop = asyncio.get_running_loop()
-    client = _ASYNC.get(loop)
+    """request_stop for code on an event loop: the same flags, over this loop's own Redis connection (bounded by
+    STOP_REDIS_TIMEOUT_S as a whole; TimeoutError or a redis error raise)."""
+    clients = _ASYNC.setdefault(asyncio.get_running_loop(), {})  # by URL: a loop outlives a test's settings
+    client = clients.get(settings.REDIS_URL)
     if client is None:
-        client = _ASYNC[loop] = redis.asyncio.Redis.from_url(settings.REDIS_URL, socket_timeout=5)
+        limit = STOP_REDIS_TIMEOUT_S
+        client = clients[settings.REDIS_URL] = redis.asyncio.Redis.from_url(
+            settings.REDIS_URL,
+            socket_timeout=limit,
+            socket_connect_timeout=limit,
+            retry=_no_retry(on_loop=True),
+        )
     now = time.time()
-    async with client.pipeline(transaction=False) as pipe:
-        for robot_id in robot_ids:
-            pipe.set(key("stop", robot_id), repr(now), ex=STOP_FLAG_TTL_S)
-        await pipe.execute()
+
+    async def flags() -> None:
+        async with client.pipeline(transaction=False) as pipe:
+            for robot_id in robot_ids:
+                pipe.set(key("stop", robot_id), repr(now), ex=STOP_FLAG_TTL_S)
+            await pipe.execute()
+
+    await asyncio.wait_for(flags(), STOP_REDIS_TIMEOUT_S * 2)
     return now
 
 
@@ -206,7 +237,45 @@ def clear_preempt(robot_id: int, execution_id: int | None = None) -> None:
         connection().eval(RELEASE, 1, key("preempt", robot_id), str(execution_id))
 
 
+UNRECORDED_TTL_S = 7 * 24 * 3600  # an end the database could not take waits this long for the sweep
+
+
+def note_unrecorded_end(execution_id: int, words: str) -> None:
+    """Keep how an execution ended when the database refused to record it (the watchdog's sweep records these
+    words once the database takes writes again, instead of "executor lost"); Redis errors raise."""
+    connection().set(key("unrecorded", execution_id), words.encode(), ex=UNRECORDED_TTL_S)
+
+
+def unrecorded_ends(execution_ids) -> dict[int, str]:
+    """{execution id: the words kept by note_unrecorded_end} for those that have some (one round trip)."""
+    ids = list(execution_ids)
+    values = connection().mget([key("unrecorded", pk) for pk in ids]) if ids else []
+    return {pk: value.decode() for pk, value in zip(ids, values, strict=True) if value}
+
+
+def forget_unrecorded_end(execution_id: int) -> None:
+    connection().delete(key("unrecorded", execution_id))
+
+
 def flags(robot_id: int) -> tuple[float, int | None]:
     """(time of the last stop or 0, the execution id that preempts this robot or None), in one round trip."""
     stop, preempt = connection().mget(key("stop", robot_id), key("preempt", robot_id))
     return (float(stop) if stop else 0.0), (int(preempt) if preempt else None)
+
+
+def request_cancel(execution_ids, words: str) -> None:
+    """Flag these executions cancelled (one instruction cancelled: execution.tasklist), with who did it in words;
+    the runner of each stops it on its next tick. Keyed by execution, so no other work of the robot is touched."""
+    pipe = connection().pipeline(transaction=False)
+    for execution_id in execution_ids:
+        pipe.set(key("cancel", execution_id), words, ex=STOP_FLAG_TTL_S)
+    pipe.execute()
+
+
+def session_flags(robot_id: int, execution_id: int) -> tuple[float, int | None, str | None]:
+    """flags() and the execution's cancel words (None: not cancelled), in one round trip: a runner's tick."""
+    stop, preempt, cancel = connection().mget(
+        key("stop", robot_id), key("preempt", robot_id), key("cancel", execution_id)
+    )
+    words = cancel.decode() if cancel else None
+    return (float(stop) if stop else 0.0), (int(preempt) if preempt else None), words

@@ -7,9 +7,12 @@ Rules (the paper's Figure 6 and section 3.8):
 - An instruction that names no robot goes to the robots selected on the page, else to the one best robot
   (`allocate`: capable, free, shortest planned path); when none is free it waits for one (`wait`, `retry`).
 - Goals are spots nobody else takes (execution/spots.py): several robots sent to one place get spots on a ring
-  in the order of their bearings; a place taken by a parked robot or another's goal gives the nearest free spot.
+  in the order of their bearings; a place taken by a parked robot or another's goal gives the nearest free spot
+  the robot can get to that walls off no goal given before it.
 - A new instruction preempts a robot's activity of lower priority (work > motion > dialog > ready); else it
   queues behind it.
+- A robot a person stopped is held (access.holds): "any" and "all robots" leave it out (and say so), the
+  system's instructions (schedule, traffic) are refused it, a person's instruction naming it releases it.
 """
 
 from __future__ import annotations
@@ -17,21 +20,23 @@ from __future__ import annotations
 import math
 import threading
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from django.conf import settings
 from django.db import connections, transaction
 from django.utils import timezone
 
-from access import leases
+import live
+from access import holds, leases
 from access.leases import ControlRefused, check_command
-from execution import coordination, route, spots
+from execution import coordination, route, spots, tasks
 from execution.models import Execution, Instruction, TimeSlot
 from fleetcore import states as statemachine
 from fleetcore import steps as step_contract
+from fleetcore.choice import ALL, RobotChoice
+from fleetcore.interpretation import Interpretation
 from fleetcore.states import Admission, Event
-from fleetcore.steps import ANY, Step, Subject
-from interpreter.lexicon import kind_words
+from fleetcore.steps import Step
 from robots import poses as pose_store
 from robots.models import Robot
 
@@ -80,25 +85,23 @@ def free_robots(moment=None) -> list[Robot]:
 
 
 def resolve_robots(
-    step: dict, moment=None, check_schedule: bool = True, user=None
+    step: Step, moment=None, check_schedule: bool = True, user=None
 ) -> tuple[list[Robot], str]:
     """The robots a step names, each online and (for people) outside its scheduled slots; and, for a step
     that names none, why the one chosen was chosen."""
-    names = step.get("robots")
-    subject = names if isinstance(names, dict) else None
-    if names in (None, "", ANY) or (subject and subject.get(ANY)):
-        robot, why = allocate(Step.from_dict(step), user, moment, check_schedule)
+    chosen = step.robots
+    if chosen.unnamed:
+        robot, why = allocate(step, user, moment, check_schedule)
         return [robot], why
-    if names == "all" or subject:
+    if chosen.mode == ALL:
         robots = free_robots(moment) if check_schedule else list(Robot.objects.filter(link_status="online"))
-        robots = [robot for robot in robots if matches(robot, subject)]
+        robots = [robot for robot in robots if matches(robot, chosen)]
         if not robots:
             raise Refused(
-                f"No robot{_of(subject)} is free now (all are offline or busy with their schedules)."
+                f"No robot{_of(chosen)} is free now (all are offline or busy with their schedules)."
             )
         return robots, ""
-    if not names:
-        raise Refused("Say which robot should do it (a name, or 'all robots').")
+    names = chosen.names
     found = {robot.name: robot for robot in Robot.objects.filter(name__in=names)}
     missing = [name for name in names if name not in found]
     if missing:
@@ -115,23 +118,14 @@ def resolve_robots(
     return robots, ""
 
 
-def matches(robot: Robot, subject: dict | None) -> bool:
-    """Whether the robot is one of a subject chosen by kind ({"model": "turtlebot", "except": ["husky"]})."""
-    if not subject:
-        return True
-    if robot.name in subject.get("except", ()):
-        return False
-    model = subject.get("model")
-    return not model or model.casefold() in kind_words(robot.model, robot.drive)
+def matches(robot: Robot, chosen: RobotChoice | None) -> bool:
+    """Whether the robot is one of those chosen (by name, kind or exclusion); any robot for None."""
+    return chosen is None or chosen.means(robot.name, robot.model, robot.drive)
 
 
-def _of(subject: dict | None) -> str:
-    """ " (turtlebot, not husky)": the subject's filter in words, for an answer."""
-    if not subject:
-        return ""
-    words = ([subject["model"]] if subject.get("model") else []) + [
-        f"not {name}" for name in subject.get("except", ())
-    ]
+def _of(chosen: RobotChoice) -> str:
+    """ " (turtlebot, not husky)": the choice's filter in words, for an answer."""
+    words = ([chosen.kind] if chosen.kind else []) + [f"not {name}" for name in chosen.exclude]
     return f" ({', '.join(words)})" if words else ""
 
 
@@ -144,12 +138,9 @@ def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) ->
     planner route.py drives with); ties by battery when known, then the name. NoneFree (the instruction may
     wait) when capable robots exist but none is free; Refused when no robot could ever do it.
     """
-    subject = step.robots.to_dict() if isinstance(step.robots, Subject) else None
-    candidates = [
-        robot
-        for robot in Robot.objects.filter(link_status=Robot.Link.ONLINE).prefetch_related("bindings")
-        if matches(robot, subject)
-    ]
+    chosen = step.robots
+    online = Robot.objects.filter(link_status=Robot.Link.ONLINE).select_related("held_by")
+    candidates = [robot for robot in online.prefetch_related("bindings") if matches(robot, chosen)]
     busy = set(
         Execution.objects.filter(robot__in=candidates)
         .exclude(status__in=FINAL)
@@ -168,18 +159,25 @@ def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) ->
     if not free:
         detail = _listed(not_now + incapable) or "no robot is online"
         if not_now:
-            raise NoneFree(f"No robot{_of(subject)} is free to {step.action} now ({detail}).")
-        raise Refused(f"No robot{_of(subject)} can {step.action} ({detail}).")
+            raise NoneFree(f"No robot{_of(chosen)} is free to {step.action} now ({detail}).")
+        raise Refused(f"No robot{_of(chosen)} can {step.action} ({detail}).")
     robot, why, unreachable = best_of(free, step.destination)
-    return robot, f"{robot.name}: {why}" + (
-        f"; {_listed(unreachable + not_now + incapable)}" if unreachable or not_now or incapable else ""
-    )
+    return robot, chosen_words([robot.name], why, unreachable + not_now + incapable)
+
+
+def chosen_words(names: list[str], why: str, passed: list[str] = ()) -> str:
+    """Whom the portal chose for an instruction that names no robot, and why, in the one form every answer
+    gives: "husky chosen (no robot named): the nearest free robot, 4.0 m to A (tiago 5.4+ m); spot is busy"."""
+    passed_over = f"; {_listed(list(passed))}" if passed else ""
+    return f"{', '.join(names)} chosen (no robot named): {why}{passed_over}"
 
 
 def _not_free(robot, busy: bool, holder, user, slot: TimeSlot | None) -> str | None:
     """Why this capable robot cannot take the step now, in words; None when it can."""
     if busy or robot.state not in IDLE:
         return f"is busy ({robot.state})"
+    if robot.held_at is not None:
+        return f"is {robot.hold_words}"
     if holder is not None and holder != user:
         return f"is held by {holder.username}"
     if slot is not None:
@@ -202,8 +200,7 @@ def best_of(free: list[Robot], destination) -> tuple[Robot, str, list[str]]:
     poses = pose_store.last_poses([robot.pk for robot in free])
     if destination is None:
         robot = min(free, key=lambda r: (-(_battery(r, poses) or 0.0), r.name))
-        battery = _battery(robot, poses)
-        return robot, (f"free, battery {battery:.0f}%" if battery is not None else "free"), []
+        return robot, _no_place_words(robot, free, poses), []
     target = (destination.x, destination.y)
     starts = {robot.pk: _position(robot, poses) for robot in free}
     ranked = sorted(
@@ -225,10 +222,14 @@ def best_of(free: list[Robot], destination) -> tuple[Robot, str, list[str]]:
         unknown = [robot for robot in ranked if starts[robot.pk] is None]
         if not unknown:
             raise Refused(f"No free robot can reach {destination.name} ({_listed(unreachable)}).")
-        return unknown[0], "free (its position is not known yet)", unreachable
+        return (
+            unknown[0],
+            "free; its position is not known yet, so how near it is could not be said",
+            unreachable,
+        )
     tied = [robot for robot in ranked if lengths.get(robot.pk, math.inf) <= best + TIE_M]
     robot = min(tied, key=lambda r: (-(_battery(r, poses) or 0.0), r.name))
-    why = f"nearest free robot, {lengths[robot.pk]:.1f} m"
+    why = f"the nearest free robot, {lengths[robot.pk]:.1f} m to {destination.name}"
     if len(tied) > 1 and _battery(robot, poses) is not None:
         why += f", battery {_battery(robot, poses):.0f}%"
     farther = [
@@ -238,6 +239,17 @@ def best_of(free: list[Robot], destination) -> tuple[Robot, str, list[str]]:
     ]
     farther = [words for words in farther if words]
     return robot, why + (f" ({', '.join(farther[:MAX_REASONS])})" if farther else ""), unreachable
+
+
+def _no_place_words(robot: Robot, free: list[Robot], poses: dict) -> str:
+    """Why this robot, for a step with no place to be nearest to ("go home", "rotate"): the fullest battery of
+    the free robots, then the first by name."""
+    battery = _battery(robot, poses)
+    if len(free) == 1:
+        return "the only free robot that can do it"
+    if battery is not None:
+        return f"the fullest battery ({battery:.0f}%) of the {len(free)} free robots that can do it"
+    return f"the first by name of the {len(free)} free robots that can do it (none reports its battery)"
 
 
 def _distance_words(robot: Robot, lengths: dict, start, target) -> str:
@@ -277,18 +289,24 @@ class Plan:
 
 
 def plan(
-    parse: dict, user, moment=None, check_schedule: bool = True, selected: list[int] | None = None
+    understood: Interpretation,
+    user,
+    moment=None,
+    check_schedule: bool = True,
+    selected: list[int] | None = None,
+    source: str = "console",
 ) -> Plan:
-    """Split the interpreter's steps into each robot's list of steps, or raise Refused (NoneFree: wait).
+    """Split the instruction's steps into each robot's list of steps, or raise Refused (NoneFree: wait).
 
     selected: robots chosen on the page; a step that names no robot goes to them. Several "any" steps of one
-    instruction go to the one robot chosen for the first ("move to A, then to B").
+    instruction go to the one robot chosen for the first ("move to A, then to B"). source: the system's
+    (access.holds.AUTOMATIC) never moves a robot held by a stop or leased by anyone.
     """
     per_robot: dict[int, list[dict]] = defaultdict(list)
     robots_by_id: dict[int, Robot] = {}
     notes: list[str] = []
     try:
-        steps = step_contract.validate(parse.get("steps"))
+        steps = understood.checked()
     except step_contract.StepError as exc:
         raise Refused(str(exc)) from None
     poses = {
@@ -296,14 +314,20 @@ def plan(
         for pk, p in pose_store.last_poses(Robot.objects.values_list("pk", flat=True)).items()
     }
     chosen: list[str] | None = _selected_names(selected)
+    said = False  # whom the page's selection chose has been said
     for checked in steps:
-        step = checked.to_dict()
-        if _unnamed(step.get("robots")) and chosen:
-            step["robots"] = chosen
-        robots, why = resolve_robots(step, moment, check_schedule, user)
+        if checked.robots.unnamed and chosen:
+            if selected and not said:
+                notes.append(chosen_words(chosen, "selected on the page"))
+                said = True
+            checked = replace(checked, robots=RobotChoice.named(*chosen))
+        robots, why = resolve_robots(checked, moment, check_schedule, user)
+        if checked.robots.mode == ALL or checked.robots.filtered:
+            robots = _unheld(robots, notes)
         if why:
             notes.append(why)
             chosen = [robot.name for robot in robots]
+        step = checked.to_dict()
         destination = step.get("destination")
         try:
             goals = spots.assign(destination, robots, poses, notes) if destination else {}
@@ -316,18 +340,39 @@ def plan(
             )
     if not per_robot:
         raise Refused("The instruction has no step a robot can do.")
+    _check_access(robots_by_id.values(), user, source)
+    return Plan({robots_by_id[pk]: steps for pk, steps in per_robot.items()}, notes)
+
+
+def _check_access(robots, user, source: str) -> None:
+    """Refused when the system's instruction meets a held or leased robot, or the person may not command one."""
+    if holds.is_automatic(source):
+        try:
+            holds.check_automatic(robots)
+        except ControlRefused as exc:
+            raise Refused(str(exc)) from None
     if user is not None:
-        for robot in robots_by_id.values():
+        for robot in robots:
             try:
                 check_command(user, robot)
             except ControlRefused as exc:
                 raise Refused(str(exc)) from None
-    return Plan({robots_by_id[pk]: steps for pk, steps in per_robot.items()}, notes)
 
 
-def _unnamed(robots) -> bool:
-    """The step leaves the robot to the portal: "any", or any one of a kind (then the first choice holds)."""
-    return robots in (None, "", ANY) or (isinstance(robots, dict) and bool(robots.get(ANY)))
+def _unheld(robots: list[Robot], notes: list[str]) -> list[Robot]:
+    """ "all robots" (or all of a kind) without the robots a stop holds: they are said, or Refused if none is left."""
+    rows = Robot.objects.filter(pk__in=[r.pk for r in robots], held_at__isnull=False).select_related(
+        "held_by"
+    )
+    held = {robot.pk: f"{robot.name} is {robot.hold_words}" for robot in rows}
+    if not held:
+        return robots
+    left = [robot for robot in robots if robot.pk not in held]
+    words = "; ".join(held.values())
+    if not left:
+        raise Refused(f"No robot is free now: {words}; name a robot to release it, or release it.")
+    notes.append(f"left out: {words} (name it to release it)")
+    return left
 
 
 def _selected_names(selected: list[int] | None) -> list[str] | None:
@@ -348,6 +393,9 @@ def dispatch(instruction: Instruction, plan: Plan) -> list[Execution]:
     now = timezone.now()
     executions, preempts = [], []
     per_robot = plan.per_robot
+    if not holds.is_automatic(instruction.source):  # a person names the robot: that releases a stop's hold
+        released = holds.release(per_robot, instruction.user, why=f"instruction #{instruction.pk}")
+        plan.notes += [f"{name} released from its hold ({words})" for name, words in released.items()]
     for robot, steps in per_robot.items():
         robot.refresh_from_db(fields=["state", "link_status"])
         if robot.state in (Robot.State.OFFLINE, Robot.State.REGISTERED):
@@ -413,12 +461,15 @@ def retry(now=None) -> list[int]:
 
 def _retry_one(instruction: Instruction, now) -> bool:
     """One waiting instruction: dispatch it, keep it waiting (with the reasons now), or refuse it."""
-    import live
-
     try:
         dispatch(
             instruction,
-            plan(instruction.parse, instruction.user, check_schedule=instruction.source != "schedule"),
+            plan(
+                Interpretation.from_dict(instruction.parse),
+                instruction.user,
+                check_schedule=instruction.source != "schedule",
+                source=instruction.source,
+            ),
         )
         live.instruction(instruction)
         return True
@@ -448,8 +499,6 @@ def _after_commit(robot_ids: list[int], preempts: list[tuple[int, int]]) -> None
 
 def launch(task: str, pk: int) -> None:
     """Start a fleet task: on the Celery workers (FLEET_EXECUTE=celery, the default) or in a thread here."""
-    from execution import tasks
-
     if getattr(settings, "FLEET_EXECUTE", "celery") == "thread":
         threading.Thread(target=_in_thread, args=(getattr(tasks, task), pk), daemon=True).start()
         return

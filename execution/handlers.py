@@ -1,4 +1,5 @@
-"""The executor's handlers, one per action of the registry (fleetcore/actions.py names each by dotted path).
+"""The executor's handlers, one per action of the registry (fleetcore/actions.py names each; HANDLERS holds
+them), and `run_step`, which finds a step's handler there.
 
 A handler takes the running Session and one checked Step, drives the robot through the session's link, and
 returns a few words on what was done; it raises StepFailed (with a reason for a person) or lets Interrupted
@@ -9,13 +10,23 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
+from contextlib import ExitStack
+
+from redis.exceptions import RedisError
 
 import alerts
 import live
-from execution import traffic
+from execution import driving, traffic, traffic_state
+from execution.link import LinkError
+from execution.make_way import aside, until_passed
+from execution.models import Execution
 from execution.route import reach_radius
+from execution.spots import ground
 from execution.steps import (
+    REDIS_LOST,
     STALL_S,
+    Interrupted,
     Session,
     Stalled,
     StepFailed,
@@ -23,7 +34,9 @@ from execution.steps import (
     follow_goal,
     travel_time,
 )
-from fleetcore import motion
+from fleetcore import motion, outcomes
+from fleetcore import traffic_tuning as tune
+from fleetcore.speed import Pace
 from fleetcore.states import Event
 from fleetcore.steps import Destination, Step, parse_task
 from fleetcore.traffic import compass
@@ -38,60 +51,81 @@ STUCK = "robot_stuck"  # the alert kind a stall raises
 
 
 def go_to(session: Session, step: Step) -> str:
-    """Move (or navigate) to the step's destination, then do its task there if it has one."""
-    note = _travel(session, step.destination, step.factor) if step.destination is not None else ""
-    if step.destination is not None and step.destination.yaw is not None:
-        note += _face(session, step.destination.yaw, step.factor)
-    return task(session, step) if step.task else f"arrived at {_where(step)}{note}"
+    """Move (or navigate) to the step's destination, then do its task there if it has one. What it did is
+    said from where the robot stands at the end (_arrive), whatever its controller or nav stack returned."""
+    if step.destination is None:
+        return task(session, step) if step.task else "arrived at its place"
+    pace = step.pace(session.link.limits())
+    ending = _arrive(session, step.destination, pace)
+    facing = _face(session, step.destination.yaw, pace) if step.destination.yaw is not None else ""
+    return f"{ending.words}{facing}" + (f"; {_task(session, step, ending.where)}" if step.task else "")
+
+
+def _arrive(session: Session, destination: Destination, pace: Pace) -> outcomes.Ending:
+    """Travel to the destination and judge, by the robot's pose at the end (fleetcore.outcomes), where it
+    ended: at the place, at the free spot it was given next to it, or elsewhere, which fails the step."""
+    spot = _travel(session, destination, pace)
+    ending = ending_at(session, destination, spot)
+    if not ending.reached:
+        raise StepFailed(f"{session.robot.name}: {ending.words}")
+    return ending
+
+
+def ending_at(session: Session, destination: Destination, spot) -> outcomes.Ending:
+    """Where the robot ended, sent to the destination and given `spot` to stop at: from its odometry now,
+    which the pose store then holds too (what every page and query reads)."""
+    pose = session.pose()
+    pose_store.store_pose(session.robot.pk, pose)
+    place, center = destination.place
+    taken_by = in_the_way(session.robot, center, center, "goal")[0] or destination.taken_by
+    return outcomes.judge(place, center, spot, pose, taken_by, fits=ground(session.robot)(*center))
 
 
 def make_way(session: Session, step: Step) -> str:
     """Move off the way of a robot that cannot get past this one (it asked, through the traffic table, or a
     person did), wait for it to pass and come back to where this one stood."""
     robot = session.robot
-    request = traffic.way_request(robot)
+    request = traffic_state.way_request(robot)
     if request is None:
         return "nobody is waiting for it to make way"
     other = Robot.objects.filter(pk=request["for"]).values_list("name", flat=True).first() or "another robot"
     try:
         home = session.pose()[:2]
-        spot = traffic.aside(robot, home, request)
+        spot = aside(robot, home, request)
         if spot is None:
-            raise StepFailed(
-                f"{robot.name}: no free spot off {other}'s way within {traffic.ASIDE_SEARCH_M:g} m"
-            )
+            raise StepFailed(f"{robot.name}: no free spot off {other}'s way within {tune.ASIDE_SEARCH_M:g} m")
         Robot.objects.transition(
             robot.pk, Event.MOVE, f"making way for {other}", session.execution.instruction_id
         )
-        limits = session.link.limits()
-        _go(session, spot, limits, step.factor)
-        waited = traffic.until_passed(session, request, home)
-        back = _go(session, home, limits, step.factor)
+        pace = step.pace(session.link.limits())
+        _go(session, spot, pace)
+        waited = until_passed(session, request, home)
+        back = ending_at(session, Destination("where it stood", *home), _go(session, home, pace))
     except BaseException as exc:  # failed or stopped: the robot waiting for it asks nobody else, goes round
-        traffic.made_way(robot, str(exc) or type(exc).__name__)
+        traffic_state.made_way(robot, str(exc) or type(exc).__name__)
         raise
-    traffic.made_way(robot)
+    traffic_state.made_way(robot)
     return (
         f"made way for {other}: {math.dist(home, spot):.1f} m {compass(home, spot)}, "
-        f"back after {waited:.0f} s{back}"
+        f"back after {waited:.0f} s" + ("" if back.kind == outcomes.ARRIVED else f" ({back.words})")
     )
 
 
-def _go(session: Session, goal, limits: motion.Limits, factor: float) -> str:
-    """To a point along a reserved route, by the robot's own navigation or the route driver."""
+def _go(session: Session, goal, pace: Pace) -> tuple[float, float]:
+    """To a point along a reserved route, by the robot's own navigation or the route driver; the spot it was
+    to stop at (the goal, or a free spot next to it when a robot stood there)."""
     if session.link.nav_kind:
-        return navigate_to(session, tuple(goal), limits)
-    return drive_route(session, tuple(goal), limits, factor)
+        return navigate_to(session, tuple(goal), pace)
+    return drive_route(session, tuple(goal), pace)
 
 
-def _face(session: Session, yaw: float, factor: float) -> str:
+def _face(session: Session, yaw: float, pace: Pace) -> str:
     """Turn on the spot to the heading the goal was given with."""
-    limits = session.link.limits()
     try:
         drive(
             session,
-            motion.Face(yaw, limits, factor),
-            travel_time(0.0, math.pi, limits, factor),
+            motion.Face(yaw, pace.limits),
+            travel_time(0.0, math.pi, pace.limits),
             stall_s=STALL_S,
         )
     except Stalled as exc:
@@ -100,28 +134,31 @@ def _face(session: Session, yaw: float, factor: float) -> str:
 
 
 def task(session: Session, step: Step) -> str:
-    """rotate(n) on the spot or clean a small square, where the robot is (after go_to, at the destination)."""
-    if step.destination is not None and step.action not in ("move", "navigate"):
-        _travel(session, step.destination, step.factor)
+    """rotate(n) on the spot or clean a small square, where the robot is, or at the step's destination."""
+    if step.destination is None:
+        return _task(session, step, "at its place")
+    ending = _arrive(session, step.destination, step.pace(session.link.limits()))
+    return f"{ending.words}; {_task(session, step, ending.where)}"
+
+
+def _task(session: Session, step: Step, where: str) -> str:
+    """Do the step's task where the robot stands (`where`, in words: "at A")."""
     name, count = parse_task(step.task or step.action)
-    where = _where(step)
     Robot.objects.transition(
-        session.robot.pk, Event.WORK, f"{name} at {where}", session.execution.instruction_id
+        session.robot.pk, Event.WORK, f"{name} {where}", session.execution.instruction_id
     )
     pose = session.pose()
-    limits = session.link.limits()
-    controller = motion.task_controller(step.task or step.action, pose, limits, step.factor)
+    limits = step.pace(session.link.limits()).limits
+    controller = motion.task_controller(step.task or step.action, pose, limits)
     if name == "rotate":
-        limit = travel_time(0.0, 2 * math.pi * count, limits, step.factor)
+        limit = travel_time(0.0, 2 * math.pi * count, limits)
     else:
-        limit = travel_time(
-            motion.CLEAN_SIZE * (motion.CLEAN_LANES + 2), 2 * math.pi * 3, limits, step.factor
-        )
+        limit = travel_time(motion.CLEAN_SIZE * (motion.CLEAN_LANES + 2), 2 * math.pi * 3, limits)
     try:
         drive(session, controller, limit, stall_s=STALL_S)
     except Stalled as exc:
-        raise StepFailed(_stuck(session, f"during {step.task or name} at {where}", str(exc))) from exc
-    return f"{step.task or name} done at {where}"
+        raise StepFailed(_stuck(session, f"during {step.task or name} {where}", str(exc))) from exc
+    return f"{step.task or name} done {where}"
 
 
 def dock(session: Session, step: Step) -> str:
@@ -132,20 +169,20 @@ def dock(session: Session, step: Step) -> str:
         session.check()
         goal = session.link.dock()
         session.mark_commanded()
-        follow_goal(session, goal, DOCK_LIMIT_S, "docking", stall_s=traffic.NAV_STALL_S, toward=False)
+        follow_goal(session, goal, DOCK_LIMIT_S, "docking", stall_s=tune.NAV_STALL_S, toward=False)
         return "docked"
     x0, y0, _ = robot.start_pose or (0.0, 0.0, 0.0)
-    _travel(session, Destination("home", x0, y0), step.factor)
-    return "back at its start pose (no docking action bound)"
+    ending = _arrive(session, Destination("its start pose", x0, y0), step.pace(session.link.limits()))
+    return f"{ending.words} (no docking action bound)"
 
 
 def move_by(session: Session, step: Step) -> str:
     """Drive straight ahead (or back) by the step's amount in metres, holding the heading it starts with."""
     distance = float(step.amount or 0.0)
     doing = f"{abs(distance):g} m {'forward' if distance >= 0 else 'back'}"
-    limits = session.link.limits()
-    controller = motion.Straight(distance, limits, step.factor)
-    _drive_by(session, f"moving {doing}", controller, travel_time(abs(distance), 0.0, limits, step.factor))
+    limits = step.pace(session.link.limits()).limits
+    controller = motion.Straight(distance, limits)
+    _drive_by(session, f"moving {doing}", controller, travel_time(abs(distance), 0.0, limits))
     return f"moved {doing}"
 
 
@@ -153,14 +190,9 @@ def turn_by(session: Session, step: Step) -> str:
     """Turn on the spot by the step's amount in degrees (left, anticlockwise, when positive)."""
     degrees = float(step.amount or 0.0)
     doing = f"{abs(degrees):g}° {'left' if degrees >= 0 else 'right'}"
-    limits = session.link.limits()
-    controller = motion.TurnBy(math.radians(degrees), limits, step.factor)
-    _drive_by(
-        session,
-        f"turning {doing}",
-        controller,
-        travel_time(0.0, abs(math.radians(degrees)), limits, step.factor),
-    )
+    limits = step.pace(session.link.limits()).limits
+    controller = motion.TurnBy(math.radians(degrees), limits)
+    _drive_by(session, f"turning {doing}", controller, travel_time(0.0, abs(math.radians(degrees)), limits))
     return f"turned {doing}"
 
 
@@ -192,9 +224,6 @@ def repeat(session: Session, step: Step) -> str:
 
     The execution's step index stays on this step while it loops, so a preempted loop goes on when resumed.
     """
-    from execution.models import Execution
-    from execution.steps import run_step
-
     index = Execution.objects.filter(pk=session.execution.pk).values_list("step_index", flat=True).get()
     body = session.execution.steps[max(0, index - (step.span or 1)) : index]
     if not body:
@@ -216,44 +245,60 @@ def report_position(session: Session, step: Step) -> str:
     return f"{session.robot.name} is at ({x:.2f}, {y:.2f}), heading {math.degrees(yaw):.0f}°"
 
 
-def _where(step: Step) -> str:
-    return step.destination.name if step.destination else "its place"
-
-
-def _travel(session: Session, destination: Destination, factor: float) -> str:
+def _travel(session: Session, destination: Destination, pace: Pace) -> tuple[float, float]:
     """Get to the destination along a reserved route (execution.traffic), by the robot's own navigation or the
-    route driver; a stall says what blocks it. Returns "" or, when its spot was taken, where it stopped."""
+    route driver; a stall says what blocks it, and any failure where the robot stopped. Returns the spot it was
+    to stop at: the destination, or a free spot next to it when a robot stood there."""
     x, y, name = destination.x, destination.y, destination.name
     Robot.objects.transition(
         session.robot.pk, Event.MOVE, f"moving to {name}", session.execution.instruction_id
     )
     live.goal(session.robot, name, x, y)  # the map draws the goal until the robot is done with it
-    limits = session.link.limits()
     try:
-        return _go(session, (x, y), limits, factor)
+        return _go(session, (x, y), pace)
     except StepFailed as exc:
-        raise StepFailed(_explain(session, destination, exc)) from exc
+        raise StepFailed(_explain(session, destination, exc) + _stopped(session, destination)) from exc
     finally:
         live.goal(session.robot, None, None, None)
 
 
-def navigate_to(session: Session, goal: tuple[float, float], limits: motion.Limits) -> str:
-    """Hand the reserved route's goals to the robot's nav stack; when it makes no progress, send them afresh
-    (a new plan from where the robot is, with what its sensors see now), up to STALL_TRIES times. A stack that
-    aborts has tried its own recoveries already: that ends the step."""
-    guess = (
-        min(limits.linear, 0.22) * traffic.NAV_PACE_GUESS
-    )  # nav stacks drive at their own (often slow) speed
-    for attempt in range(STALL_TRIES + 1):
-        try:
-            return traffic.travel(session, goal, limits, guess / limits.linear, nav=True)
-        except Stalled as exc:
-            _stalled(session, exc, attempt)
+def _stopped(session: Session, destination: Destination) -> str:
+    """ "; it stopped 0.8 m north of A": where a robot whose step failed on the way stands (its last pose)."""
+    pose = session.link.poses.value
+    if pose is None:
+        return ""
+    place, center = destination.place
+    return f"; it stopped {outcomes.offset(place, center, pose[:2])}"
+
+
+def navigate_to(session: Session, goal: tuple[float, float], pace: Pace) -> str:
+    """Hand the reserved route's goals to the robot's nav stack at the step's pace; when it makes no progress,
+    send them afresh (a new plan from where the robot is, with what its sensors see now), up to STALL_TRIES
+    times. A stack that aborts has tried its own recoveries already: that ends the step.
+
+    The speed word is kept on the stack's own top speed (`Pace.stack_share`): nav2 through its controller's
+    speed limit, move_base through its local planner's max_vel_x. A stack that takes no limit is not asked:
+    the portal drives the route itself at that pace. A limit the stack refuses fails the step before any goal
+    is sent."""
+    share = pace.stack_share
+    if share is not None and not session.link.surface.can_limit_speed:
+        return drive_route(session, goal, pace)
+    with ExitStack() as held:
+        if session.link.surface.can_limit_speed:
+            try:
+                held.enter_context(session.link.speed_limited(share))
+            except LinkError as exc:
+                raise StepFailed(str(exc)) from exc
+        for attempt in range(STALL_TRIES + 1):
+            try:
+                return driving.travel(session, goal, pace, nav=True)
+            except Stalled as exc:
+                _stalled(session, exc, attempt)
     return ""
 
 
-def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limits, factor: float) -> str:
-    """Drive a reserved route (execution.traffic: planned in space and time, claimed stretch by stretch) with the
+def drive_route(session: Session, goal: tuple[float, float], pace: Pace) -> str:
+    """Drive a reserved route (execution.driving: planned in space and time, claimed stretch by stretch) with the
     Figure 7 controller: loose at the corners, within tolerance at the goal.
 
     Stalled on the way (something the plan did not know), the robot backs off a little and plans again from
@@ -261,17 +306,17 @@ def drive_route(session: Session, goal: tuple[float, float], limits: motion.Limi
     """
     for attempt in range(STALL_TRIES + 1):
         try:
-            return traffic.travel(session, goal, limits, factor)
+            return driving.travel(session, goal, pace)
         except Stalled as exc:
             _stalled(session, exc, attempt)
-            back_off(session, limits)
+            back_off(session, pace.top)
     return ""
 
 
 def _stalled(session: Session, exc: Stalled, attempt: int) -> None:
     """A stall: the first one raises the robot_stuck alert; the last try's ends the step."""
     if attempt == 0:
-        alerts.raise_alert(STUCK, session.robot, f"{exc} (trying again)")
+        alerts.raise_alert(STUCK, session.robot, f"{exc} (trying again)", session.execution.event)
     if attempt == STALL_TRIES:
         raise Stalled(f"{exc}; tried {STALL_TRIES + 1} times", exc.pose)
 
@@ -292,18 +337,21 @@ def _explain(session: Session, destination: Destination, exc: StepFailed) -> str
         else f"({pose[0]:.1f}, {pose[1]:.1f}) on the way to {destination.name}"
     )
     reason = f"{session.robot.name}: blocked by {other} at {place} ({detail})"
-    alerts.raise_alert(STUCK, session.robot, reason)
+    alerts.raise_alert(STUCK, session.robot, reason, session.execution.event)
     return reason
 
 
 def _stuck(session: Session, what: str, detail: str) -> str:
     reason = f"{session.robot.name}: stuck {what} ({detail.removeprefix(session.robot.name + ': ')})"
-    alerts.raise_alert(STUCK, session.robot, reason)
+    alerts.raise_alert(STUCK, session.robot, reason, session.execution.event)
     return reason
 
 
-def in_the_way(robot: Robot, at: tuple[float, float], goal: tuple[float, float]) -> tuple[str | None, str]:
+def in_the_way(
+    robot: Robot, at: tuple[float, float], goal: tuple[float, float], only: str = ""
+) -> tuple[str | None, str]:
     """(the name of the robot standing at the goal, or else next to `at`, by their last poses; "goal"/"here").
+    only: "goal" looks at the goal only.
 
     Two robots touch when their reach discs (half their footprints' diagonals) meet; NEAR_M more is allowed
     for odometry and the pose store's age.
@@ -311,7 +359,7 @@ def in_the_way(robot: Robot, at: tuple[float, float], goal: tuple[float, float])
     others = {other.pk: other for other in Robot.objects.exclude(pk=robot.pk).only("pk", "name", "footprint")}
     poses = pose_store.last_poses(list(others))
     mine = reach_radius(robot.footprint)
-    for spot, where in ((goal, "goal"), (at, "here")):
+    for spot, where in ((goal, "goal"), (at, "here"))[: 1 if only == "goal" else 2]:
         near = [
             (math.dist(spot, (pose["x"], pose["y"])), others[pk].name)
             for pk, pose in poses.items()
@@ -326,7 +374,7 @@ def back_off(session: Session, limits: motion.Limits) -> None:
     """Reverse slowly for a moment, to leave room to turn: only into room it has claimed (a robot standing or
     waiting behind it keeps it where it is; run w: a Husky that stalled backed blind into a TurtleBot)."""
     x, y, yaw = session.pose()
-    reach = BACK_REVERSE * limits.linear * BACK_OFF_S * session.link.clock.rate + traffic.APPROACH_SLACK
+    reach = BACK_REVERSE * limits.linear * BACK_OFF_S * session.link.clock.rate + tune.APPROACH_SLACK
     behind = (x - reach * math.cos(yaw), y - reach * math.sin(yaw))
     if traffic.claim(session.robot, (x, y), behind, session.check) is not None:
         return
@@ -335,3 +383,23 @@ def back_off(session: Session, limits: motion.Limits) -> None:
         session.send(-BACK_REVERSE * limits.linear, 0.0)
         session.pose()
     session.link.halt()
+
+
+HANDLERS: dict[str, Callable[[Session, Step], str]] = {
+    handler.__name__: handler
+    for handler in (go_to, task, dock, make_way, report_position, move_by, turn_by, wait, repeat)
+}  # the functions the registry's entries name (fleetcore.actions.Action.handler)
+
+
+def run_step(session: Session, step: dict) -> str:
+    """Run one step with its action's handler (fleetcore/actions.py, HANDLERS); return a few words on what was
+    done. A Redis error from anywhere in the handler (e.g. releasing its route as the step ends) is the
+    executor's loss of Redis, said in a person's words."""
+    checked = Step.from_dict(step)
+    handler = HANDLERS.get(checked.spec.handler or "")
+    if handler is None:
+        raise StepFailed(f"{session.robot.name}: {checked.action!r} is not something the executor runs")
+    try:
+        return handler(session, checked)
+    except RedisError as exc:
+        raise Interrupted("failed", f"{REDIS_LOST} ({exc})") from exc

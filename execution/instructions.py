@@ -1,75 +1,165 @@
 """Submitting an instruction: interpret it, store it and hand it to execution (or say why not), in one transaction.
 
-Stop instructions ("stop", "halt everything", "stop husky") do not queue: the robots' stop flags are raised and a
-zero velocity published from an event loop before any database write (execution.fast_stop, as the STOP button
-does), then execution.control.stop checks, stops again, cancels what was queued and audits. Everything else is
+The text is read once (`interpreter.service.read`) into the typed Interpretation (fleetcore.interpretation), which
+says whether it is a stop and which robots it names. Stop instructions ("stop", "halt everything", "stop husky")
+do not queue: read with the grammar the process has (no Redis on the way), a zero velocity is published from an
+event loop and the robots' stop flags raised before any database write (execution.fast_stop, as the STOP button does), then execution.control.stop checks, stops again,
+cancels what was queued and audits; a database or Redis that fails meanwhile is said in the outcome, never raised. Everything else is
 checked against the step contract (fleetcore.steps) and becomes one Execution per robot, run by the Celery
 workers (execution.tasks.drain_robot, one per robot). A database that fails midway leaves no row behind.
 """
 
 from __future__ import annotations
 
+import logging
+from dataclasses import dataclass
+
 from django.db import transaction
 from django.utils import timezone
 
 import live
+from access import holds
 from access.leases import ControlRefused
 from access.roles import can_control
 from audit import records as audit
-from execution import dispatch, fast_stop, queries
+from execution import dispatch, fast_stop, queries, queues, tasklist
+from execution.bookkeeping import brief_lock_wait
 from execution.models import Instruction
+from fleetcore import faults
+from fleetcore.interpretation import EVERY, Interpretation
 from fleetcore.states import Event
+from interpreter.service import read
 from robots.models import Robot
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """A text read once: what it was understood as and, for a stop, the robots it stops (EVERY: all of them;
+    None: no stop). Made once per text (`Reading.of`): the page's socket makes it for a stop's head start and
+    hands it to `submit`, which neither parses the text nor asks "is it a stop?" again."""
+
+    understood: Interpretation
+    stops: set[str] | str | None
+
+    @classmethod
+    def of(cls, parse: Interpretation | dict) -> Reading:
+        understood = Interpretation.from_dict(parse)
+        return cls(understood, _stop_names(understood) if understood.is_stop else None)
 
 
 def submit(
     text: str,
     user,
     source: str = "console",
-    parse: dict | None = None,
+    parse: Reading | Interpretation | dict | None = None,
     answer_to=None,
     robot_ids: list[int] | None = None,
+    cause: str = "",
 ) -> Instruction:
     """Receive, interpret and (when understood and allowed) dispatch one instruction.
 
-    parse: an interpreter result given by the caller (schedules, tests); else the interpreter is asked.
+    parse: the text as already read (the page's socket read it for a stop's head start: `understand`), or an
+    instruction the portal wrote (Interpretation.direct: click-to-move, schedules; or its stored form); else
+    the text is read here, once.
     robot_ids: the robots selected on the page; a step whose text names no robot goes to them.
+    cause: why the system sends it (no user), kept with it: "make way for husky, instruction #14 by admin".
     """
     text = (text or "").strip()
     if not text:
         raise ValueError("An instruction needs some text.")
-    result = parse if parse is not None else _interpret(text)
-    if _is_stop(result) and (user is None or can_control(user)):
-        fast_stop.stop_blocking(_stop_names(result))  # before any database write, like the button
+    reading = (
+        parse if isinstance(parse, Reading) else Reading.of(parse if parse is not None else _interpret(text))
+    )
+    if reading.stops is not None and (user is None or can_control(user)):
+        return _stop_first(text, user, source, reading, answer_to, robot_ids)
     with transaction.atomic():
-        return _store_and_dispatch(text, user, source, result, answer_to, robot_ids)
+        instruction = _store_and_dispatch(text, user, source, reading, answer_to, robot_ids, cause)
+    if reading.understood.cancels and instruction.status == Instruction.Status.RECEIVED:
+        return _cancel(
+            instruction, reading.understood, user
+        )  # after the commit: the runner it stops settles it
+    return instruction
 
 
-def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to, robot_ids=None) -> Instruction:
-    instruction = Instruction.objects.create(text=text, user=user, source=source, answer_to=answer_to)
+def _stop_first(text: str, user, source: str, reading: Reading, answer_to, robot_ids) -> Instruction:
+    """The zeros before any database write, like the button; then the instruction is stored and control.stop
+    answers. A database that cannot take the row leaves the stop done and said: an unsaved instruction whose
+    outcome names what could not be recorded (a failure that is no store's is raised, after the zeros)."""
+    fast_stop.stop_blocking(reading.stops)
+    try:
+        with brief_lock_wait(), transaction.atomic():
+            return _store_and_dispatch(text, user, source, reading, answer_to, robot_ids)
+    except Exception as exc:
+        words = faults.store_fault(exc)
+        if words is None:
+            raise
+        log.warning("stop %r not stored (%s); the robots are stopped", text, words)
+        return _unrecorded_stop(text, user, source, reading, words)
+
+
+def _unrecorded_stop(text: str, user, source: str, reading: Reading, words: str) -> Instruction:
+    """The stop again, past the database that failed (zeros and flags), as an instruction that was not saved."""
+    from execution.control import stop  # read when called: the socket's tests stand in a control module
+
+    understood, names = reading.understood, reading.stops
+    if names == EVERY:
+        names = set(Robot.objects.values_list("name", flat=True))
+    results = stop(sorted(names), user, source=source, database_fault=words)
+    reached = "; ".join(f"{name}: {why}" for name, why in sorted(results.items()))
+    now = timezone.now()
+    return Instruction(
+        text=text,
+        user=user,
+        source=source,
+        type=understood.type,
+        parse=understood.to_dict(),
+        status=Instruction.Status.SUCCEEDED,
+        outcome=f"{reached or 'no robot'}.{results.note()}",
+        received_at=now,
+        interpreted_at=now,
+        finished_at=now,
+    )
+
+
+def _store_and_dispatch(
+    text: str, user, source: str, reading: Reading, answer_to, robot_ids=None, cause: str = ""
+) -> Instruction:
+    understood = reading.understood
+    instruction = Instruction.objects.create(
+        text=text, user=user, source=source, answer_to=answer_to, cause=cause[:255]
+    )
     audit.record(user, "instruct", text[:255], instruction=instruction.pk, source=source)
     if answer_to is not None:
         close_dialog(answer_to, "answered", answered_by=instruction)
-    instruction.parse = result
-    instruction.type = result.get("type", "")
+    instruction.parse = understood.to_dict()
+    instruction.type = understood.type
     instruction.interpreted_at = timezone.now()
     instruction.save(update_fields=["parse", "type", "interpreted_at"])
-    if result.get("needs_user") or not result.get("valid", True):
-        return _ask(instruction, result)
-    if _is_stop(result):
-        return _stop(instruction, result, user)
-    if not result.get("steps"):  # "don't move tiago": understood, and nothing is to be done
-        return _close(instruction, Instruction.Status.SUCCEEDED, result.get("reason") or "Nothing to do.")
-    if queries.is_question(result):  # answered now from live state; nothing moves, nothing queues
+    if understood.needs_user:
+        return _ask(instruction, understood)
+    if reading.stops is not None:
+        return _stop(instruction, reading.stops, user)
+    if understood.cancels:
+        return instruction  # carried out by submit after the commit (execution.tasklist)
+    if understood.releases:
+        return _release(instruction, understood, user)
+    if not understood.steps:  # "don't move tiago": understood, and nothing is to be done
+        return _close(instruction, Instruction.Status.SUCCEEDED, understood.reason or "Nothing to do.")
+    if understood.is_question:  # answered now from live state; nothing moves, nothing queues
         try:
-            words, about = queries.answer(result, robot_ids)
+            words, about = queries.answer(understood, robot_ids)
         except dispatch.Refused as exc:
             return _close(instruction, Instruction.Status.REFUSED, str(exc))
         instruction.robots.set(about)
         return _close(instruction, Instruction.Status.SUCCEEDED, words)
     try:
-        plan = dispatch.plan(result, user, check_schedule=source != "schedule", selected=robot_ids)
-        dispatch.dispatch(instruction, plan)
+        plan = dispatch.plan(
+            understood, user, check_schedule=source != "schedule", selected=robot_ids, source=source
+        )
+        executions = dispatch.dispatch(instruction, plan)
+        queues.push_queues([execution.robot_id for execution in executions])  # the task lists, after commit
     except dispatch.NoneFree as exc:
         instruction = dispatch.wait(instruction, str(exc))
     except (dispatch.Refused, ControlRefused) as exc:
@@ -78,19 +168,17 @@ def _store_and_dispatch(text: str, user, source: str, result: dict, answer_to, r
     return instruction
 
 
-def stop_names(text: str) -> set[str] | str | None:
-    """The robots a typed stop names ("all" for "stop", "halt everything"); None when the text is no stop.
+def understand(text: str) -> Reading:
+    """The text read once, with the robots it stops (EVERY for "stop", "halt everything"; None: no stop).
 
-    For callers on an event loop (the page's socket) that raise the flags and send the zeros there first.
+    For the page's socket: it raises the flags and sends the zeros from its event loop first, then hands the
+    same reading to `submit` (the text is not parsed again, nor its stop's robots looked up again).
     """
-    result = _interpret((text or "").strip()) if (text or "").strip() else {}
-    return _stop_names(result) if _is_stop(result) else None
+    return Reading.of(_interpret((text or "").strip()))
 
 
-def _interpret(text: str) -> dict:
-    from interpreter.service import interpret
-
-    return interpret(text)
+def _interpret(text: str) -> Interpretation:
+    return read(text)
 
 
 def _close(instruction: Instruction, status: str, outcome: str) -> Instruction:
@@ -102,14 +190,11 @@ def _close(instruction: Instruction, status: str, outcome: str) -> Instruction:
     return instruction
 
 
-def _ask(instruction: Instruction, result: dict) -> Instruction:
+def _ask(instruction: Instruction, understood: Interpretation) -> Instruction:
     """The person must answer: the robots named (and ready) wait in the dialog state."""
-    question = result.get("question") or result.get("reason") or "Please rephrase the instruction."
-    for step in result.get("steps", []):
-        names = step.get("robots")
-        if isinstance(names, list):
-            for robot in Robot.objects.filter(name__in=names, state=Robot.State.READY):
-                Robot.objects.transition(robot.pk, Event.ASK, question[:255], instruction)
+    question = understood.question or understood.reason or "Please rephrase the instruction."
+    for robot in Robot.objects.filter(name__in=understood.named(), state=Robot.State.READY):
+        Robot.objects.transition(robot.pk, Event.ASK, question[:255], instruction)
     return _close(instruction, Instruction.Status.NEEDS_USER, question)
 
 
@@ -135,32 +220,19 @@ def close_dialog(instruction: Instruction, reason: str, answered_by: Instruction
         _close(instruction, Instruction.Status.CANCELLED, f"{instruction.outcome} ({reason})")
 
 
-def _is_stop(result: dict) -> bool:
-    return any(step.get("action") == "stop" for step in result.get("steps", []))
+def _stop_names(understood: Interpretation) -> set[str] | str:
+    """The robots a stop (or release) names, or EVERY (Interpretation.stop_names; the fleet read only for a
+    choice by kind or exclusion)."""
+    return understood.stop_names(lambda: Robot.objects.values_list("name", "model", "drive"))
 
 
-def _stop_names(result: dict) -> set[str] | str:
-    """The robots a stop instruction names, or "all" ("stop", "stop all", "halt everything"); "stop every robot
-    except husky" names the others (one query, only for a subject chosen by kind or exclusion)."""
-    names = set()
-    for step in result.get("steps", []):
-        robots = step.get("robots")
-        if isinstance(robots, dict) and (robots.get("except") or robots.get("model")):
-            rows = Robot.objects.only("name", "model", "drive")
-            names |= {robot.name for robot in rows if dispatch.matches(robot, robots)}
-            continue
-        if not isinstance(robots, list) or not robots:
-            return "all"
-        names |= set(robots)
-    return names
+def _stop(instruction: Instruction, names: set[str] | str, user) -> Instruction:
+    from execution.control import stop  # read when called: the socket's tests stand in a control module
 
-
-def _stop(instruction: Instruction, result: dict, user) -> Instruction:
-    from execution.control import stop
-
-    names = _stop_names(result)
-    if names == "all":
+    chose = ""
+    if names == EVERY:
         names = set(Robot.objects.values_list("name", flat=True))
+        chose = f"every robot stopped ({len(names)}: a stop that names no robot stops them all). "
     if not names:
         return _close(instruction, Instruction.Status.REFUSED, "No robot is registered.")
     try:
@@ -171,5 +243,48 @@ def _stop(instruction: Instruction, result: dict, user) -> Instruction:
     instruction.dispatched_at = instruction.first_command_at = timezone.now()
     instruction.save(update_fields=["dispatched_at", "first_command_at"])
     failed = {name: why for name, why in results.items() if why != "stopped"}
-    outcome = "; ".join(f"{name}: {why}" for name, why in sorted(results.items()))
+    outcome = chose + "; ".join(f"{name}: {why}" for name, why in sorted(results.items()))
+    note = results.note() if hasattr(results, "note") else ""  # what of the stop's bookkeeping failed
+    outcome += f".{note}" if note else ""
     return _close(instruction, Instruction.Status.FAILED if failed else Instruction.Status.SUCCEEDED, outcome)
+
+
+def _cancel(instruction: Instruction, understood: Interpretation, user) -> Instruction:
+    """ "cancel #12", "cancel husky's instruction": take one instruction back (execution.tasklist)."""
+    step = next(step for step in understood.steps if step.get("action") == "cancel")
+    try:
+        target = tasklist.named(step)
+        done = tasklist.cancel_instruction(target, user, source=instruction.source)
+    except (tasklist.NothingToCancel, ControlRefused) as exc:
+        return _close(instruction, Instruction.Status.REFUSED, str(exc))
+    instruction.robots.set(done.robots.all())
+    return _close(instruction, Instruction.Status.SUCCEEDED, tasklist.said(done))
+
+
+def _release(instruction: Instruction, understood: Interpretation, user) -> Instruction:
+    """ "release tiago" ("release": every robot held): let robots a stop holds move again (access.holds)."""
+    names = _stop_names(understood)
+    held = Robot.objects.filter(held_at__isnull=False)
+    robots = list(held if names == EVERY else Robot.objects.filter(name__in=names))
+    missing = set() if names == EVERY else set(names) - {robot.name for robot in robots}
+    if missing:
+        return _close(
+            instruction, Instruction.Status.REFUSED, f"No robot named {', '.join(sorted(missing))}."
+        )
+    try:
+        released = holds.release_by(user, robots) if user is not None else holds.release(robots, None)
+    except ControlRefused as exc:
+        return _close(instruction, Instruction.Status.REFUSED, str(exc))
+    instruction.robots.set(robots)
+    words = [f"released {name} ({was})" for name, was in released.items()]
+    words += [f"{robot.name} was not held" for robot in robots if robot.name not in released]
+    return _close(instruction, Instruction.Status.SUCCEEDED, "; ".join(words) or "No robot is held.")
+
+
+def on_make_way_asked(sender, robot: Robot, asked: str, cause: str, **kwargs) -> str | None:
+    """Submit the make_way instruction traffic asks for (execution.signals.make_way_asked) as the system's (no
+    user, source "traffic"): the robot's hold, lease, schedule and state are checked as for any automatic
+    instruction (execution.dispatch). The words of its refusal, or None when it was taken."""
+    parse = Interpretation.for_robots([asked], "make_way", f"make way for {robot.name}")
+    sent = submit(f"{asked} make way for {robot.name}", None, source="traffic", parse=parse, cause=cause)
+    return sent.outcome if sent.status == "refused" else None

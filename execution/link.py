@@ -1,21 +1,29 @@
 """A robot's command link: its bound topics, spoken in its message types, over the shared rosbridge client.
 
 Publishing goes through robots.rosbridge.sync (one link per endpoint per process). Poses come from the
-odometry binding composed with the robot's start pose, corrected by amcl_pose when the robot has one.
+odometry binding composed with the robot's start pose, corrected by amcl_pose when the robot has one; the
+odometry passes the robot's gate first (fleetcore.posegate), and a refused message wakes whoever waits for a
+pose, so the step fails at once with the reason (`fault`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import math
 import threading
 import time
 from dataclasses import dataclass
 
 from fleetcore import geometry, motion
+from fleetcore.posegate import InvalidOdometry, PoseGate
+from fleetcore.speed import Limits
+from robots import commands
+from robots import poses as pose_store
 from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, CommandSurface
 from robots.models import Robot
+from robots.rosbridge import sync
 
 
 class LinkError(RuntimeError):
@@ -23,25 +31,28 @@ class LinkError(RuntimeError):
 
 
 def client_for(robot: Robot):
-    from robots.rosbridge.sync import get_client
-
     try:
-        return get_client(robot.endpoint)
+        return sync.get_client(robot.endpoint)
     except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the outcome
         raise LinkError(f"{robot.name}: cannot reach {robot.endpoint}: {exc}") from exc
 
 
-def publish_all(client, publishes) -> None:
-    for topic, message, type_ in publishes:
-        client.publish(topic, message, type_)
+def publish_all(client, items, wait: bool = False) -> list:
+    """Send a surface's commands (publishes, service calls) on a sync client; the calls' answers with `wait`."""
+    return client.runner.run(commands.send(client.client, items, wait), commands.CALL_TIMEOUT + 1.0)
 
 
 def publish_zero(robot: Robot) -> None:
-    """Publish a zero velocity on the robot's move topic and cancel its ROS 1 navigation goal, now."""
+    """Publish a zero velocity on the robot's move topic and cancel its navigation goal, now (a goal topic's
+    robot: a goal where its last pose says it is)."""
     surface = CommandSurface.of(robot)
     if not surface.can_move:
         raise LinkError(f"{robot.name}: no move topic is bound")
-    publish_all(client_for(robot), surface.zero())
+    here = None
+    if surface.nav_kind == NAV_SIMPLE:
+        pose = pose_store.last_poses([robot.pk]).get(robot.pk)
+        here = (pose["x"], pose["y"], pose["yaw"]) if pose else None
+    publish_all(client_for(robot), surface.zero(here=here))
 
 
 class Latest:
@@ -93,6 +104,7 @@ class RobotLink:
         self.start = tuple(robot.start_pose) if robot.start_pose else (0.0, 0.0, 0.0)
         self.local = None  # the last odometry pose, in the odometry frame
         self.poses = Latest()
+        self.gate = PoseGate(robot.max_linear)
         self.clock = motion.ClockRate()  # its clock against ours (a simulator may run faster than real time)
         self.nav_status = Latest()
         self.client = None
@@ -127,9 +139,21 @@ class RobotLink:
 
     # ----- poses -----
     def _on_odom(self, msg: dict) -> None:
-        self.local = geometry.pose_of(msg)
+        try:
+            reading = self.gate.admit(msg, time.time())
+        except InvalidOdometry:
+            self.poses.put(self.poses.value)  # wake the step waiting for a pose: it fails with the reason
+            return
+        self.local = reading.pose
         self.poses.put(geometry.compose(self.start, self.local))
-        self.clock.update(time.monotonic(), motion.stamp_of(msg))
+        self.clock.update(time.monotonic(), reading.stamp)
+
+    @property
+    def fault(self) -> dict | None:
+        """Why the gate refuses this robot's odometry now, as a pose record says it ("fault", "fault_since")."""
+        if self.gate.fault is None:
+            return None
+        return {"fault": self.gate.fault, "fault_since": self.gate.since}
 
     def _on_amcl(self, msg: dict) -> None:
         """Move the odometry origin so that the current odometry pose lands on the amcl estimate."""
@@ -201,10 +225,47 @@ class RobotLink:
         return Goal(NAV_NAV2, handle.id, tuple(self.robot.start_pose or (0.0, 0.0))[:2], handle, result)
 
     def cancel(self, goal: Goal) -> None:
+        """Cancel the goal as its stack takes it; a goal topic has no cancel: a goal where the robot is."""
         if goal.kind == NAV_MOVE_BASE:
             self.client.publish(*self.surface.cancel_move_base(goal.id))
         elif goal.kind == NAV_NAV2:
             self.client.cancel_action_goal(goal.handle)
+        elif goal.kind == NAV_SIMPLE and self.poses.value is not None:
+            self.client.publish(*self.surface.simple_goal(*self.poses.value, time.time()))
 
-    def limits(self) -> motion.Limits:
-        return motion.Limits(self.robot.max_linear, self.robot.max_angular)
+    # ----- speed -----
+    @contextlib.contextmanager
+    def speed_limited(self, share: float | None):
+        """Hold the navigation stack at `share` of its own top speed for the block (None: its own top speed),
+        and give it its own top speed back after, however the block ends. LinkError when the stack does not
+        take the limit (before anything moves)."""
+        surface = self.surface
+        try:
+            top = self._planner_top() if surface.speed_kind == "service" else None
+            publish_all(self.client, [surface.speed_limit(share, top)], wait=True)
+        except Exception as exc:  # the service refused or did not answer: the word cannot be kept
+            raise LinkError(f"{self.robot.name}: its navigation stack took no speed limit ({exc})") from exc
+        try:
+            yield
+        finally:
+            with contextlib.suppress(
+                Exception
+            ):  # a link that is down cannot take it; the next trip sets it again
+                publish_all(self.client, [surface.speed_limit(None, top)], wait=True)
+
+    def _planner_top(self) -> float:
+        """The local planner's max_vel_x as registered (its configured top speed), else as it reads now."""
+        planner = self.surface.speed_target.removesuffix("/set_parameters")
+        text = self.robot.params.filter(name=f"{planner}/max_vel_x").values_list("value", flat=True).first()
+        with contextlib.suppress(TypeError, ValueError):
+            value = float(json.loads(text))
+            if math.isfinite(value) and value > 0:
+                return value
+        (reply,) = publish_all(self.client, [self.surface.read_speed()], wait=True)
+        top = motion.reconfigured(reply, "max_vel_x")
+        if top is None:
+            raise LinkError(f"{self.robot.name}: {planner} has no max_vel_x")
+        return top
+
+    def limits(self) -> Limits:
+        return Limits(self.robot.max_linear, self.robot.max_angular)

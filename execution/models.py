@@ -43,8 +43,15 @@ class TimeSlot(models.Model):
         return f"{self.robot} {self.start:%H:%M}-{self.end:%H:%M} {self.goal} {self.task}".strip()
 
 
+EXPIRED = "expired: no answer within"  # the note of a question nobody answered in time (execution/sweeps.py)
+
+
 class InstructionQuerySet(models.QuerySet):
     FINAL = ("refused", "succeeded", "failed", "cancelled")
+
+    def in_progress_list(self):
+        """What the console's Progress list shows: all but the questions that expired unanswered."""
+        return self.exclude(status="cancelled", outcome__contains=f"({EXPIRED}")
 
     def open(self):
         """Not final yet: received, needs_user, queued or running."""
@@ -89,7 +96,10 @@ class Instruction(models.Model):
     type = models.CharField(max_length=3, choices=Type.choices, blank=True)
     status = models.CharField(max_length=12, choices=Status.choices, default=Status.RECEIVED)
     source = models.CharField(
-        max_length=20, default="console", help_text="console, api, cli, schedule, teleop"
+        max_length=20, default="console", help_text="console, api, cli, schedule, traffic, teleop"
+    )
+    cause = models.CharField(
+        max_length=255, blank=True, help_text="why the system sent it (no user): e.g. make way for husky, #14"
     )
     answer_to = models.ForeignKey(
         "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="answers"
@@ -115,6 +125,11 @@ class Instruction(models.Model):
 
     def __str__(self):
         return f"#{self.pk} {self.text[:60]}"
+
+    @property
+    def expired(self) -> bool:
+        """A question nobody answered in time: cancelled by the sweep with its note; gone from Progress."""
+        return self.status == self.Status.CANCELLED and f"({EXPIRED}" in self.outcome
 
     @property
     def is_final(self) -> bool:
@@ -145,7 +160,7 @@ class ExecutionQuerySet(models.QuerySet):
         current, goals = {}, {}
         active = ("running",) if running_only else ("running", "queued")
         rows = self.filter(robot_id__in=robot_ids, status__in=active).select_related("instruction")
-        for execution in rows.order_by("created_at"):
+        for execution in rows.order_by("queued_at", "pk"):
             if execution.robot_id in current:
                 continue
             steps = execution.steps or []
@@ -186,6 +201,10 @@ class Execution(models.Model):
     step_index = models.PositiveSmallIntegerField(default=0)
     worker = models.CharField(max_length=255, blank=True, help_text="the Celery worker that claimed it")
     created_at = models.DateTimeField(default=timezone.now)
+    queued_at = models.DateTimeField(
+        default=timezone.now,
+        help_text="its place in the robot's queue (oldest first); moved up or down by a person",
+    )
     dispatched_at = models.DateTimeField(null=True, blank=True)
     first_command_at = models.DateTimeField(null=True, blank=True)
     motion_started_at = models.DateTimeField(null=True, blank=True)
@@ -200,7 +219,16 @@ class Execution(models.Model):
         constraints = [
             models.UniqueConstraint(fields=["instruction", "robot"], name="execution_unique_per_robot"),
         ]
-        indexes = [models.Index(fields=["robot", "status", "created_at"])]
+        indexes = [
+            models.Index(fields=["robot", "status", "created_at"]),
+            models.Index(fields=["robot", "status", "queued_at"]),
+        ]
 
     def __str__(self):
         return f"{self.robot} #{self.instruction_id} {self.status}"
+
+    @property
+    def event(self) -> str:
+        """What the alerts call this execution: whatever befalls it (a stall, the failure it ends in, its executor
+        lost) is one event, one alert (alerts.raise_alert)."""
+        return f"execution {self.pk}"

@@ -1,7 +1,8 @@
 """Questions answered from live state, moving nothing: where a robot is, what it is doing, which robots are free,
 how far one is from a place, what one can do.
 
-A question is an instruction whose steps are all query actions (fleetcore/actions.py, category "query"); submit
+A question is an instruction whose steps are all query actions (fleetcore/actions.py, category "query";
+`Interpretation.is_question`); submit
 answers it at once in the instruction's outcome (the console and the API show it like any other outcome): no
 execution is queued, so a busy robot is answered about without waiting for it.
 """
@@ -14,6 +15,8 @@ from execution import dispatch, route
 from execution.models import Execution
 from fleetcore import geometry
 from fleetcore.actions import ACTIONS
+from fleetcore.choice import NAMES, RobotChoice
+from fleetcore.interpretation import Interpretation
 from places.models import Location
 from robots import poses as pose_store
 from robots.models import Robot
@@ -21,57 +24,65 @@ from robots.models import Robot
 ACTIVE = (Execution.Status.RUNNING, Execution.Status.QUEUED, Execution.Status.PREEMPTED)
 
 
-def is_question(result: dict) -> bool:
-    """Whether every step of an interpreted instruction asks something."""
-    steps = result.get("steps") or []
-    return bool(steps) and all(
-        getattr(ACTIONS.get(step.get("action") or ""), "category", "") == "query" for step in steps
-    )
-
-
-def answer(result: dict, selected: list[int] | None = None) -> tuple[str, list[Robot]]:
-    """The answer to each question step, in words, and the robots it is about."""
+def answer(understood: Interpretation, selected: list[int] | None = None) -> tuple[str, list[Robot]]:
+    """The answer to each question step (Interpretation.is_question), in words, and the robots it is about."""
     lines, about = [], {}
-    for step in result["steps"]:
-        robots = _robots(step.get("robots"), selected)
+    for step, chosen in zip(understood.steps, understood.choices, strict=True):
+        robots = _robots(chosen, selected)
         about.update({robot.pk: robot for robot in robots})
         lines.append(_ANSWERS[step["action"]](step, robots))
     return " ".join(lines), list(about.values())
 
 
-def _robots(names, selected: list[int] | None) -> list[Robot]:
+def _robots(chosen: RobotChoice | None, selected: list[int] | None) -> list[Robot]:
     """The robots a question names; unnamed: the ones selected on the page, else every robot (of its kind)."""
-    if isinstance(names, list):
-        found = {robot.name: robot for robot in Robot.objects.filter(name__in=names)}
-        missing = [name for name in names if name not in found]
+    if chosen is not None and chosen.mode == NAMES:
+        found = {robot.name: robot for robot in Robot.objects.filter(name__in=chosen.names)}
+        missing = [name for name in chosen.names if name not in found]
         if missing:
             raise dispatch.Refused(f"No robot named {', '.join(missing)} is registered.")
-        return [found[name] for name in names]
+        return [found[name] for name in chosen.names]
     rows = Robot.objects.filter(pk__in=selected) if selected else Robot.objects.all()
-    subject = names if isinstance(names, dict) else None
-    return [robot for robot in rows.order_by("name") if dispatch.matches(robot, subject)]
+    return [robot for robot in rows.order_by("name") if dispatch.matches(robot, chosen)]
 
 
 def _where(step: dict, robots: list[Robot]) -> str:
     poses = pose_store.last_poses([robot.pk for robot in robots])
+    faults = pose_store.pose_faults([robot.pk for robot in robots])
     places = list(Location.objects.values_list("name", "x", "y"))
-    return " ".join(_position_words(robot, poses.get(robot.pk), places) for robot in robots) or "No robot."
+    return (
+        " ".join(
+            _position_words(robot, poses.get(robot.pk), faults.get(robot.pk), places) for robot in robots
+        )
+        or "No robot."
+    )
 
 
-def _position_words(robot: Robot, pose: dict | None, places) -> str:
+def _position_words(robot: Robot, pose: dict | None, fault: dict | None, places) -> str:
+    if fault is not None:
+        last = f"; its last good position was ({pose['x']:.2f}, {pose['y']:.2f})" if pose else ""
+        return f"{pose_store.fault_words(robot.name, fault)}{last}."
     if pose is None:
         return f"{robot.name}: position not known yet ({robot.link_status})."
     x, y = float(pose["x"]), float(pose["y"])
     heading = math.degrees(geometry.wrap(float(pose.get("yaw", 0.0))))
     near = min(places, key=lambda p: math.dist((x, y), (p[1], p[2])), default=None)
     at = f", {math.dist((x, y), (near[1], near[2])):.1f} m from {near[0]}" if near else ""
-    return f"{robot.name} is at ({x:.2f}, {y:.2f}), heading {heading:.0f}°{at}."
+    return f"{robot.name} {_is_at(pose)} ({x:.2f}, {y:.2f}), heading {heading:.0f}°{at}."
+
+
+def _is_at(pose: dict) -> str:
+    """ "is at", or for a stale pose "was at, 3.2 s ago (stale)," said before the place."""
+    age = pose_store.pose_age(pose)
+    if age is None or age <= pose_store.STALE_S:
+        return "is at"
+    return f"was, {age:.1f} s ago (stale), at"
 
 
 def _doing(step: dict, robots: list[Robot]) -> str:
     rows = Execution.objects.filter(robot__in=robots, status__in=ACTIVE).select_related("instruction")
     work: dict[int, list[Execution]] = {}
-    for row in rows.order_by("created_at", "pk"):
+    for row in rows.order_by("queued_at", "pk"):
         work.setdefault(row.robot_id, []).append(row)
     return " ".join(_doing_words(robot, work.get(robot.pk, [])) for robot in robots) or "No robot."
 
@@ -124,18 +135,26 @@ def _distance(step: dict, robots: list[Robot]) -> str:
     target = step["destination"]
     goal = (float(target["x"]), float(target["y"]))
     poses = pose_store.last_poses([robot.pk for robot in robots])
+    faults = pose_store.pose_faults([robot.pk for robot in robots])
     row = route.fleet_map()
     lines = []
     for robot in robots:
         pose = poses.get(robot.pk)
+        if robot.pk in faults:
+            words = pose_store.fault_words(robot.name, faults[robot.pk])
+            lines.append(f"{words}; I cannot say how far it is from {target['name']}.")
+            continue
         if pose is None:
             lines.append(f"{robot.name}: position not known yet.")
             continue
         start = (float(pose["x"]), float(pose["y"]))
         planned = route.planned_length(robot, start, goal, row)
         path = f"{planned:.1f} m along its path" if planned is not None else "no path fits it"
+        age = pose_store.pose_age(pose)
+        stale = f" (by its last pose, {age:.1f} s old: stale)" if age and age > pose_store.STALE_S else ""
         lines.append(
-            f"{robot.name} is {math.dist(start, goal):.1f} m from {target['name']} in a straight line ({path})."
+            f"{robot.name} is {math.dist(start, goal):.1f} m from {target['name']} in a straight line "
+            f"({path}){stale}."
         )
     return " ".join(lines) or "No robot."
 

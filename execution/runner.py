@@ -17,10 +17,13 @@ from django.utils import timezone
 
 import alerts
 import live
-from execution import coordination
+from access import holds
+from execution import coordination, queues
+from execution.handlers import run_step
 from execution.link import LinkError, RobotLink
 from execution.models import Execution, Instruction
-from execution.steps import Interrupted, LinkLost, Session, StepFailed, advance, run_step
+from execution.steps import Interrupted, LinkLost, Session, StepFailed, advance
+from fleetcore import faults, outcomes
 from fleetcore.states import Event
 from robots import links
 from robots.models import Robot
@@ -58,16 +61,14 @@ def drain_robot(robot_id: int) -> bool:
 
 
 def next_execution(robot_id: int, preferred: int | None = None) -> Execution | None:
-    """The preemptor if one is named, else the oldest waiting execution of the robot."""
+    """The preemptor if one is named, else the first in the robot's queue (oldest, unless a person moved it)."""
     _, flagged = coordination.flags(robot_id)
     for pk in (preferred, flagged):
         if pk is not None:
             found = Execution.objects.filter(pk=pk, robot_id=robot_id, status__in=WAITING).first()
             if found is not None:
                 return found
-    return (
-        Execution.objects.filter(robot_id=robot_id, status__in=WAITING).order_by("created_at", "pk").first()
-    )
+    return Execution.objects.filter(robot_id=robot_id, status__in=WAITING).order_by("queued_at", "pk").first()
 
 
 def claim(execution: Execution, token: str) -> bool:
@@ -88,6 +89,8 @@ def run_execution(execution: Execution, heartbeat: coordination.Heartbeat) -> in
     """Run one execution from its current step; return the execution that preempted it, if any."""
     close_old_connections()
     coordination.clear_preempt(execution.robot_id, execution.pk)
+    if _held_back(execution):
+        return None
     if not claim(execution, heartbeat.token):
         return None
     execution.refresh_from_db()
@@ -115,11 +118,50 @@ def run_execution(execution: Execution, heartbeat: coordination.Heartbeat) -> in
         words.append(f"{type(exc).__name__}: {exc}")
     finally:
         _halt(link)
-    if finish(execution, heartbeat.token, outcome, "; ".join(words)) and outcome == "failed":
-        alerts.raise_alert(
-            "step_failed", execution.robot, f"instruction #{execution.instruction_id}: {words[-1]}"
+    try:
+        ended = finish(execution, heartbeat.token, outcome, "; ".join(words))
+    except Exception as exc:
+        return _unrecorded(execution, exc, outcome, "; ".join(words))
+    if ended and outcome == "failed":
+        alerts.raise_alert(  # a stall's robot_stuck alert, if it raised one, becomes this: one event, one alert
+            "step_failed",
+            execution.robot,
+            f"instruction #{execution.instruction_id}: {words[-1]}",
+            execution.event,
         )
     return preemptor
+
+
+def _unrecorded(execution: Execution, exc: Exception, outcome: str, words: str) -> None:
+    """The database refused the end of an execution whose robot is halted: its words are kept in Redis, for the
+    watchdog's sweep to record ("stopped; the database is locked ...") once the database takes writes again,
+    never left "running" for good nor called "executor lost". A failure that is no store's is raised."""
+    fault = faults.store_fault(exc)  # away or refusing: the end is kept for the sweep either way
+    if fault is None:
+        raise exc
+    said = f"{words}; not recorded at once: {fault}" if outcome == "succeeded" else f"stopped; {fault}"
+    log.warning("execution %s ended (%s) but not recorded: %s", execution.pk, words, fault)
+    try:
+        coordination.note_unrecorded_end(execution.pk, said)
+    except Exception:  # both stores away: the sweep says "executor lost" once they are back
+        log.exception("execution %s: its end could not be kept in Redis either", execution.pk)
+    return None
+
+
+def _held_back(execution: Execution) -> bool:
+    """A robot a stop holds runs nothing it did not get after the stop from a person: an execution queued or
+    preempted before the stop (a race with its cancel) or the system's is cancelled, with the hold's words."""
+    robot = Robot.objects.filter(pk=execution.robot_id).select_related("held_by").first()
+    if robot is None or robot.held_at is None:
+        return False
+    instruction = Instruction.objects.get(pk=execution.instruction_id)
+    if not holds.is_automatic(instruction.source) and execution.created_at > robot.held_at:
+        return False
+    Execution.objects.filter(pk=execution.pk, status__in=WAITING).update(
+        status=Execution.Status.CANCELLED, finished_at=timezone.now(), error=holds.refusal(robot)[:2000]
+    )
+    settle(execution.instruction_id)
+    return True
 
 
 def _halt(link: RobotLink | None) -> None:
@@ -161,7 +203,9 @@ def settle(instruction_id: int, note: str = "") -> None:
         status = Instruction.Status.CANCELLED
     else:
         status = Instruction.Status.SUCCEEDED
-    outcome = "; ".join(f"{row.robot.name}: {row.status}{_detail(row)}" for row in rows)
+    outcome = "; ".join(
+        outcomes.robot_line(row.robot.name, row.status, row.error or row.outcome) for row in rows
+    )
     chosen = Instruction.objects.filter(pk=instruction_id).values_list("outcome", flat=True).first()
     outcome = f"{chosen}. {outcome}" if chosen else outcome  # who was chosen and why (execution.dispatch)
     Instruction.objects.filter(pk=instruction_id).exclude(status__in=Instruction.FINAL).update(
@@ -170,12 +214,10 @@ def settle(instruction_id: int, note: str = "") -> None:
     _push_instruction(instruction_id)
 
 
-def _detail(row: Execution) -> str:
-    words = row.error or row.outcome
-    return f" ({words})" if words else ""
-
-
 def _push_instruction(instruction_id: int) -> None:
     instruction = Instruction.objects.filter(pk=instruction_id).first()
     if instruction is not None:
         live.instruction(instruction)
+        queues.push_queues(
+            Execution.objects.filter(instruction_id=instruction_id).values_list("robot_id", flat=True)
+        )

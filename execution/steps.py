@@ -16,17 +16,19 @@ import uuid
 from dataclasses import dataclass, field
 
 from django.utils import timezone
-from django.utils.module_loading import import_string
 from redis.exceptions import RedisError
 
 from execution import coordination
 from execution.link import RobotLink
 from execution.models import Execution, Instruction
-from fleetcore import geometry, motion
-from fleetcore.steps import Step
+from fleetcore import faults, geometry
+from fleetcore.speed import Limits
 from robots import poses as pose_store
 
 ODOMETRY_TIMEOUT = 3.0  # s without an odometry message fails the step ("no odometry for 3 s")
+FAULT_GRACE_S = (
+    0.5  # odometry refused on the way: halted, then this long for a good pose before the step fails
+)
 ODOMETRY_GAP = 0.5  # s without odometry: the robot is told to stop while we wait, and the link is looked at
 STORE_POSE_EVERY = 0.5  # s between stores of the robot's own pose (the pose hub fills in between)
 MOVED, TURNED = 0.02, 0.05  # m, rad: motion seen in odometry
@@ -78,17 +80,21 @@ class Session:
     origin: tuple | None = None
     commanded: bool = False
     moving: bool = False
+    gate_checked: bool = False  # the links process's verdict on the robot's odometry was read
 
     @property
     def robot(self):
         return self.link.robot
 
     def pose(self) -> tuple[float, float, float]:
-        """The next odometry pose; a gap stops the robot while waiting, a dropped link or 3 s fail the step."""
+        """The next odometry pose; a gap stops the robot while waiting, a dropped link or 3 s fail the step,
+        and so does odometry the gate refuses (here or in the links process), at once."""
+        self._check_gate()
         waited = 0.0
         while True:
             self.heartbeat.beat()
             pose, self.seen = self.link.next_pose(self.seen, ODOMETRY_GAP)
+            self._check_gate()
             if pose is not None:
                 self._note_motion(pose)
                 return pose
@@ -100,6 +106,33 @@ class Session:
                 topic = self.link.odometry.target
                 raise StepFailed(f"{self.robot.name}: no odometry on {topic} for {ODOMETRY_TIMEOUT:g} s")
 
+    def _check_gate(self) -> None:
+        """StepFailed, the robot told to stop, when its odometry is refused: nothing can be driven on it. A robot
+        flagged before the step fails at once; one whose odometry turns bad on the way is halted and given
+        FAULT_GRACE_S for a good pose to come back (one hostile frame among good ones costs a pause, not the
+        step; bad odometry that lasts fails it within the grace)."""
+        fault = self.link.fault
+        if fault is None and not self.gate_checked:
+            self.gate_checked = True
+            fault = pose_store.pose_faults([self.robot.pk]).get(self.robot.pk)
+            if fault is not None:
+                self._halt_on_fault(fault)
+        if fault is None:
+            return
+        with contextlib.suppress(Exception):  # a link that is down cannot take it; the reason is the fault
+            self.link.halt()
+        deadline = time.monotonic() + FAULT_GRACE_S
+        while time.monotonic() < deadline:
+            time.sleep(0.02)
+            if self.link.fault is None:
+                return
+        self._halt_on_fault(self.link.fault or fault)
+
+    def _halt_on_fault(self, fault: dict) -> None:
+        with contextlib.suppress(Exception):  # a link that is down cannot take it; the reason is the fault
+            self.link.halt()
+        raise StepFailed(pose_store.fault_words(self.robot.name, fault))
+
     def _zero(self) -> None:
         try:
             self.link.halt()
@@ -109,12 +142,17 @@ class Session:
     def check(self) -> None:
         """Raise Interrupted if the robot was stopped or preempted, or its lock was lost; tell the heartbeat."""
         if not self.heartbeat.held:
+            if self.heartbeat.fault:  # Redis refuses writes (a full disk): a stop cannot be seen; halted here
+                raise Interrupted("failed", f"stopped; {self.heartbeat.why_lost}")
             raise Interrupted("failed", f"executor lost: {self.heartbeat.why_lost}")
         self.heartbeat.beat()
         try:
             self._check_flags()
         except RedisError as exc:  # no stop flag or preemption can be seen, no lock kept: not ours to drive
-            raise Interrupted("failed", f"{REDIS_LOST} ({exc})") from exc
+            words = faults.refusal(
+                exc
+            )  # it answers, but refuses writes: the robot is halted, and that is why
+            raise Interrupted("failed", f"stopped; {words}" if words else f"{REDIS_LOST} ({exc})") from exc
 
     def _check_flags(self) -> None:
         """Store the pose now and then; raise Interrupted if the robot was stopped or preempted."""
@@ -122,9 +160,11 @@ class Session:
             self.last_store = time.monotonic()
             if self.link.poses.value is not None:
                 pose_store.store_pose(self.robot.pk, self.link.poses.value)
-        stopped_at, preemptor = coordination.flags(self.robot.pk)
+        stopped_at, preemptor, cancelled = coordination.session_flags(self.robot.pk, self.execution.pk)
         if stopped_at > self.started:
             raise Interrupted("cancelled", "stopped")
+        if cancelled is not None:
+            raise Interrupted("cancelled", cancelled)
         if preemptor is not None and preemptor != self.execution.pk:
             raise Interrupted("preempted", f"preempted by instruction of execution {preemptor}", preemptor)
 
@@ -267,6 +307,7 @@ def follow_goal(
             if outcome == "failed":
                 raise Aborted(f"{session.robot.name}: {what} {NAV_WORDS[outcome]}")
             if outcome in NAV_WORDS:
+                _stop_behind_cancel(session)
                 raise StepFailed(f"{session.robot.name}: {what} {NAV_WORDS[outcome]}")
             verdict = progress.update(pose)
             if verdict == "late":
@@ -281,25 +322,22 @@ def follow_goal(
         raise
 
 
-def expected_time(distance: float, turn: float, limits: motion.Limits, factor: float) -> float:
-    """The time a motion takes at the robot's speed for this step."""
-    return distance / (limits.linear * factor) + turn / (limits.angular * factor)
+CANCEL_GRACE_S = 0.5  # a stop sends its zeros and cancels first and raises its flags after (fast_stop)
 
 
-def travel_time(distance: float, turn: float, limits: motion.Limits, factor: float) -> float:
-    """The limit of a motion: twice its expected time plus slack (accelerations, corners, a slow link)."""
-    return 2 * expected_time(distance, turn, limits, factor) + SLACK_S
+def _stop_behind_cancel(session: Session) -> None:
+    """A stack's goal cancelled from outside is, most often, a person's stop whose flags are not up yet: look for
+    them a moment (Interrupted: the step ends "stopped", not failed) before calling it the stack's doing."""
+    deadline = time.monotonic() + CANCEL_GRACE_S
+    while time.monotonic() < deadline:
+        session.check()
+        time.sleep(0.05)
 
 
-def run_step(session: Session, step: dict) -> str:
-    """Run one step with its action's handler (fleetcore/actions.py); return a few words on what was done."""
-    checked = Step.from_dict(step)
-    if checked.spec.handler is None:
-        raise StepFailed(f"{session.robot.name}: {checked.action!r} is not something the executor runs")
-    try:
-        return import_string(checked.spec.handler)(session, checked)
-    except RedisError as exc:  # e.g. releasing its route as the step ends: the same loss, in a person's words
-        raise Interrupted("failed", f"{REDIS_LOST} ({exc})") from exc
+def travel_time(distance: float, turn: float, limits: Limits) -> float:
+    """The limit of a motion driven within these limits (a step's pace: fleetcore.speed): twice the time it
+    takes at them, plus slack (accelerations, corners, a slow link)."""
+    return 2 * (distance / limits.linear + turn / limits.angular) + SLACK_S
 
 
 def advance(execution: Execution, index: int) -> None:

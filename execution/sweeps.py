@@ -3,10 +3,12 @@ for when the owner is gone. The scheduler process runs sweep() every tick.
 
 | status                    | owner                                         | sweep (deadline)                          |
 |---------------------------|-----------------------------------------------|-------------------------------------------|
-| Execution running         | its runner, heartbeating the robot's lock     | watchdog.recover (the lock's 1 s)         |
+| Execution running         | its runner, heartbeating the robot's lock     | watchdog.recover (the lock's 1 s); an end |
+|                           | (an end the database refused: kept in Redis)  | kept in Redis is recorded with its words  |
 | Execution queued/preempted| the runner holding the robot; kick_stalled    | robot offline for OFFLINE_S: failed       |
 | Instruction received      | submit (one transaction)                      | RECEIVED_S: failed                        |
-| Instruction needs_user    | the person's answer (submit answer_to)        | ANSWER_S: cancelled "no answer"           |
+| Instruction needs_user    | the person's answer (submit answer_to)        | answer_s(): cancelled, "expired: no answer|
+|                           |                                               | within 10 min"                            |
 | Instruction queued/running| runner.settle when its last execution ends    | all executions final: settled; none at    |
 |                           |                                               | all after RECEIVED_S: failed              |
 """
@@ -15,15 +17,15 @@ from __future__ import annotations
 
 from datetime import timedelta
 
+from django.conf import settings
 from django.db.models import Count, Q
 from django.utils import timezone
 
 from execution.instructions import close_dialog
-from execution.models import Execution, ExecutionQuerySet, Instruction
+from execution.models import EXPIRED, Execution, ExecutionQuerySet, Instruction
 from execution.runner import settle
 
 RECEIVED_S = 60.0  # storing, interpreting and dispatching is one transaction: a minute is far past it
-ANSWER_S = 600.0  # a question nobody answered for ten minutes is dropped ("no answer")
 OFFLINE_S = 30.0  # queued work for a robot nobody has seen for this long fails ("robot offline")
 NOT_DISPATCHED = "not dispatched: the process storing it stopped before it was handed to a robot"
 ROBOT_OFFLINE = "robot offline: its link has been down for more than {:.0f} s"
@@ -49,11 +51,23 @@ def fail_stale_received(now) -> list[int]:
     return stale
 
 
+def answer_s() -> float:
+    """How long a question waits for its answer (settings.FLEET_QUESTION_EXPIRY_SECONDS)."""
+    return float(settings.FLEET_QUESTION_EXPIRY_SECONDS)
+
+
+def expiry_note(seconds: float) -> str:
+    """ "expired: no answer within 10 min" (or "within 90 s")."""
+    within = f"{seconds / 60:g} min" if seconds % 60 == 0 else f"{seconds:g} s"
+    return f"{EXPIRED} {within}"
+
+
 def cancel_unanswered(now) -> list[int]:
-    """Questions nobody answered within ANSWER_S: cancelled, their robots back to ready."""
-    unanswered = list(Instruction.objects.older_than("needs_user", ANSWER_S, now, since="interpreted_at"))
+    """Questions nobody answered within answer_s(): expired with a note, their robots back to ready."""
+    limit = answer_s()
+    unanswered = list(Instruction.objects.older_than("needs_user", limit, now, since="interpreted_at"))
     for instruction in unanswered:
-        close_dialog(instruction, "no answer")
+        close_dialog(instruction, expiry_note(limit))
     return [instruction.pk for instruction in unanswered]
 
 

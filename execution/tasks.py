@@ -1,8 +1,10 @@
 """Celery tasks of the fleet: thin, idempotent, taking primary keys (queues: instructions, control)."""
 
 from celery import shared_task
+from django.contrib.auth import get_user_model
 
 from execution import runner
+from execution.control import stop
 
 
 @shared_task(name="execution.tasks.drain_robot", acks_late=True, ignore_result=True)
@@ -18,9 +20,5 @@ def drain_robot(robot_id: int) -> bool:
 @shared_task(name="execution.tasks.stop_robots", acks_late=True, ignore_result=True)
 def stop_robots(robot_ids: list[int], user_id: int | None = None) -> dict:
     """Stop robots from a worker (for callers that cannot reach the endpoints themselves)."""
-    from django.contrib.auth import get_user_model
-
-    from execution.control import stop
-
     user = get_user_model().objects.filter(pk=user_id).first() if user_id else None
     return stop(robot_ids, user, source="task")

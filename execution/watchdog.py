@@ -9,10 +9,14 @@ dropped (others then go round it as a robot standing there, instead of waiting o
 executor_lost alert raised. To send that zero at once, the scheduler keeps a link open to the endpoint of every robot being
 driven (keep_links): connecting at that moment cost up to a second more on a busy machine.
 
+An execution whose runner ended it (its robot halted) while the database refused to record that end is found the
+same way once its lock lapses: its runner kept the end's words in Redis (runner._unrecorded), and they are recorded
+instead of "executor lost" ("stopped; the database is locked ..."), with no executor_lost alert.
+
 Failed, not resumed: the step was cut at an unknown point (half a rotation, a goal the stack may still hold),
 the robot may since have been moved or stopped by hand, and a robot that starts moving by itself after a
 crash is the worse surprise. A person sees the alert and sends the instruction again if it still makes sense
-(README, "Fault survival").
+(docs/fault-survival.md).
 """
 
 from __future__ import annotations
@@ -24,21 +28,17 @@ from datetime import timedelta
 from django.utils import timezone
 
 import alerts
-from execution import coordination, traffic
+from execution import coordination, dispatch, traffic_state
 from execution.link import publish_zero
 from execution.models import Execution
 from execution.runner import WAITING, settle
 from fleetcore.states import Event
 from robots.models import Robot
+from robots.rosbridge.sync import get_client
 
 log = logging.getLogger(__name__)
 STALLED_AFTER = 3.0  # s a queued execution may wait for its task before the robot is kicked
 LOST = "executor lost: the process running it stopped renewing its lock; the robot was stopped"
-
-
-def lost_executions(robot_ids=None) -> list[Execution]:
-    """Running executions whose runner no longer holds the robot's lock (one query, one Redis round trip)."""
-    return _lost(_running(robot_ids))
 
 
 def _running(robot_ids=None) -> list[Execution]:
@@ -57,17 +57,27 @@ def recover(robot_ids=None) -> list[int]:
     """Stop the robots of lost executions, fail those executions and settle them; return their keys."""
     running = _running(robot_ids)
     keep_links(execution.robot.endpoint for execution in running)
-    failed = [execution for execution in _lost(running) if _claim_failure(execution)]
+    lost = _lost(running)
+    said = coordination.unrecorded_ends(execution.pk for execution in lost) if lost else {}
+    failed = [execution for execution in lost if _claim_failure(execution, said.get(execution.pk, LOST))]
     if not failed:
         return []
     with ThreadPoolExecutor(max_workers=min(8, len(failed))) as pool:  # one unreachable robot delays no other
         list(pool.map(_stop, [execution.robot for execution in failed]))
     for execution in failed:
-        traffic.release(execution.robot, None)  # its route and claims, which nobody renews now, free at once
-        Robot.objects.transition(execution.robot_id, Event.FAIL, LOST, execution.instruction_id)
+        why = said.get(execution.pk, LOST)
+        # its route and claims, which nobody renews now, free at once
+        traffic_state.release(execution.robot, None)
+        Robot.objects.transition(execution.robot_id, Event.FAIL, why[:255], execution.instruction_id)
         settle(execution.instruction_id)
+        if execution.pk in said:  # its runner ended it, the database refused the record: no executor was lost
+            coordination.forget_unrecorded_end(execution.pk)
+            continue
         alerts.raise_alert(
-            "executor_lost", execution.robot, f"instruction #{execution.instruction_id}: {LOST}"
+            "executor_lost",
+            execution.robot,
+            f"instruction #{execution.instruction_id}: {LOST}",
+            execution.event,
         )
     return [execution.pk for execution in failed]
 
@@ -85,8 +95,6 @@ def keep_links(endpoints) -> None:
 
 
 def _open_link(endpoint: str) -> None:
-    from robots.rosbridge.sync import get_client
-
     try:
         get_client(endpoint)
     except Exception as exc:  # unreachable now: the next look tries again
@@ -94,12 +102,12 @@ def _open_link(endpoint: str) -> None:
         log.info("%s: no link for the watchdog yet: %s", endpoint, exc)
 
 
-def _claim_failure(execution: Execution) -> bool:
+def _claim_failure(execution: Execution, why: str = LOST) -> bool:
     """Fail the execution unless its runner finished it meanwhile (a conditional update: one writer wins)."""
     return bool(
         Execution.objects.filter(
             pk=execution.pk, status=Execution.Status.RUNNING, worker=execution.worker
-        ).update(status=Execution.Status.FAILED, finished_at=timezone.now(), error=LOST)
+        ).update(status=Execution.Status.FAILED, finished_at=timezone.now(), error=why[:2000])
     )
 
 
@@ -122,11 +130,9 @@ def stalled_robots() -> list[int]:
 
 def kick_stalled() -> list[int]:
     """Send a drain task for each stalled robot (at most one every few seconds per robot)."""
-    from execution.dispatch import launch
-
     kicked = []
     for robot_id in stalled_robots():
         if coordination.connection().set(coordination.key("kick", robot_id), 1, nx=True, ex=5):
-            launch("drain_robot", robot_id)
+            dispatch.launch("drain_robot", robot_id)
             kicked.append(robot_id)
     return kicked

@@ -5,13 +5,21 @@ bench's trial code (bench/response.py) over each robot's bound move and odometry
 """
 
 import asyncio
+import time
 
+from asgiref.sync import sync_to_async
 from celery import shared_task
 from django.db import models, transaction
 from django.utils import timezone
 
+from execution.instructions import submit
+from execution.models import Instruction
 from experiments import paper
+from experiments.drivers import DirectDriver
 from experiments.models import ExperimentRun
+from experiments.probe import RobotLink, watch_odometry
+from experiments.response import speed_grid
+from robots.rosbridge import RosbridgeClient
 
 KINDS = ("response", "success")
 MAX_TRIALS = 50
@@ -88,15 +96,11 @@ class Progress:
         ExperimentRun.objects.filter(pk=self.run_pk).update(done=models.F("done") + self.per_step)
 
     async def astep(self) -> None:
-        from asgiref.sync import sync_to_async
-
         await sync_to_async(self.step, thread_sensitive=False)()
 
 
 def robot_link(robot):
     """A bench RobotLink from a registered robot's move and odometry bindings."""
-    from experiments.probe import RobotLink
-
     bound = {b.action: b.target for b in robot.bindings.all() if b.target}
     missing = [a for a in ("move", "odometry") if a not in bound]
     if missing:
@@ -108,11 +112,6 @@ def robot_link(robot):
 
 async def _response(robots, params: dict, progress) -> dict:
     """Start/stop response over the paper's speed grid (capped by each robot's limits), robot by robot."""
-    from experiments.drivers import DirectDriver
-    from experiments.probe import watch_odometry
-    from experiments.response import speed_grid
-    from robots.rosbridge import RosbridgeClient
-
     links = [robot_link(r) for r in robots]
     clients = {}
     out = {}
@@ -141,11 +140,6 @@ async def _response(robots, params: dict, progress) -> dict:
 
 def _success(robots, user, params: dict, progress) -> dict:
     """Type IV instructions ("shift R to G") to each robot's goal; the share that succeeded."""
-    import time
-
-    from execution.instructions import submit
-    from execution.models import Instruction
-
     goal = params.get("goal", "A")
     out = {}
     for robot in robots:

@@ -1,6 +1,10 @@
 """Summaries of timing samples: medians first (the machine is shared and noisy), then the tail."""
 
+import cProfile
+import io
 import math
+import pstats
+import time
 
 
 def percentile(samples: list[float], q: float) -> float | None:
@@ -33,11 +37,6 @@ def p50_p99(samples: list[float], digits: int = 3) -> dict:
 
 def profile_calls(call, calls: int) -> tuple[float, str]:
     """Run call() once to warm it up, then `calls` times under cProfile: (ms per call, the top 20 by cumulative)."""
-    import cProfile
-    import io
-    import pstats
-    import time
-
     call()  # links open once, as in a running portal
     prof = cProfile.Profile()
     t0 = time.perf_counter()

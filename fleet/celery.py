@@ -8,9 +8,11 @@ import os
 
 import redis
 from celery import Celery
-from celery.signals import worker_process_init
+from celery.signals import worker_init, worker_process_init
 from kombu import transport
 from kombu.transport import redis as kombu_redis
+
+from fleetcore import heartbeat
 
 os.environ.setdefault("DJANGO_SETTINGS_MODULE", "fleet.settings")
 
@@ -51,6 +53,17 @@ app.autodiscover_tasks()
 @worker_process_init.connect
 def load_heavy_state(**_kwargs):
     """Load the ontology once per worker process, never at import time."""
+    # Deferred: fleet/__init__.py imports this module before the app registry is ready (the service's models).
     from interpreter.service import warm_up
 
     warm_up()
+
+
+@worker_init.connect
+def start_heartbeat(**_kwargs):
+    """The worker's heartbeat, from a thread of its main process: a stopped or frozen worker is seen as hung, not
+    one whose consumer waits for its broker (fleet/hangwatch.py would otherwise restart every worker during a
+    Redis outage, and their executors with them)."""
+    beat = heartbeat.from_env()
+    if beat is not None:
+        beat.start_thread()

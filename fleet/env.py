@@ -4,12 +4,16 @@ Every helper raises ImproperlyConfigured naming the variable, so a bad value sto
 says what to fix. No Django import beyond the exception: settings.py calls these before Django is set up.
 """
 
+import ipaddress
 import os
 import secrets
 from pathlib import Path
 from urllib.parse import urlparse
 
+import dj_database_url
 from django.core.exceptions import ImproperlyConfigured
+
+from robots.endpoints import AllowList
 
 TRUE_WORDS = {"1", "true", "yes", "on"}
 FALSE_WORDS = {"0", "false", "no", "off", ""}
@@ -80,8 +84,6 @@ def env_list(name: str, default: list[str]) -> list[str]:
 
 def env_database(name: str, default_sqlite: Path) -> dict:
     """Turn DATABASE_URL into Django's DATABASES['default'] (SQLite file when unset)."""
-    import dj_database_url
-
     raw = os.environ.get(name)
     if not raw:
         # IMMEDIATE: several robots' runners write at once; a deferred transaction that later upgrades its
@@ -173,11 +175,22 @@ def env_str(name: str, default: str | None = None, min_length: int = 0) -> str |
 
 def env_networks(name: str, default: list[str]) -> list[str]:
     """Read a comma-separated allow-list of networks (CIDRs), addresses and host names."""
-    from robots.endpoints import AllowList
-
     entries = env_list(name, default)
     try:
         AllowList.parse(entries)
     except ValueError as exc:
         raise ImproperlyConfigured(f"{name}: {exc}") from None
+    return entries
+
+
+def env_addresses(name: str, default: list[str]) -> list[str]:
+    """Read a comma-separated list of addresses and CIDRs (no host names: a proxy is trusted by its address)."""
+    entries = env_list(name, default) if os.environ.get(name, "").strip() else default
+    for entry in entries:
+        try:
+            ipaddress.ip_network(entry, strict=False)
+        except ValueError:
+            raise ImproperlyConfigured(
+                f"{name}: {entry!r} is neither an address nor a network (CIDR)"
+            ) from None
     return entries

@@ -17,6 +17,9 @@ import subprocess
 from pathlib import Path
 from urllib.parse import quote
 
+from django.conf import settings
+from django.db import connection
+
 BASE_DIR = Path(__file__).resolve().parent.parent
 STOP_GRACE_S = 10.0  # after SIGTERM, before SIGKILL
 POSTGRES_PORT = 5432
@@ -36,9 +39,6 @@ def database_url(db: dict) -> str:
 def fleet_env() -> dict[str, str]:
     """This process's environment with what a fleet process needs to share its database, Redis, keys, world and
     execution queue (as they are in settings now, which a test may have changed since start-up)."""
-    from django.conf import settings
-    from django.db import connection
-
     shared = {
         "DJANGO_SETTINGS_MODULE": settings.SETTINGS_MODULE,
         "DATABASE_URL": database_url(connection.settings_dict),

@@ -14,6 +14,7 @@ its death reach the terminal with its name in front. One Ctrl-C stops everything
 
 from __future__ import annotations
 
+import http.client
 import os
 import shlex
 import signal
@@ -22,12 +23,28 @@ import sys
 import threading
 import time
 import urllib.request
+import xmlrpc.client
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from fleet.supervision import Layout, LogRelay, Program, render_config, start_supervisord, wait_for_rpc
+import redis
+from redis.backoff import NoBackoff
+from redis.retry import Retry
+
+from fleet import hangwatch, runguard
+from fleet.supervision import (
+    Bounds,
+    Layout,
+    LogRelay,
+    Program,
+    render_config,
+    rpc,
+    start_supervisord,
+    wait_for_rpc,
+)
+from fleetcore.world import load_world
 
 BASE_DIR = Path(__file__).resolve().parent.parent
 HOST = "127.0.0.1"
@@ -63,6 +80,12 @@ class Setup:
     def url(self) -> str:
         return f"http://{HOST}:{self.port}/"
 
+    def needs(self) -> runguard.Needs:
+        """What this run holds: the var folder, the portal's and the simulator's ports, the Redis socket."""
+        offsets = [endpoint.port_offset for endpoint in load_world(self.world).endpoints]
+        ports = (self.port, *(self.sim_port_base + offset for offset in offsets))
+        return runguard.Needs(self.var_dir, ports, None if self.redis_url else self.redis_socket)
+
     def env(self) -> dict[str, str]:
         """Every process's environment: ours, with the Redis they share and unbuffered output."""
         redis_url = self.redis_url or f"unix://{self.redis_socket}"
@@ -70,33 +93,57 @@ class Setup:
             **os.environ,
             "REDIS_URL": redis_url,
             "FLEET_VAR_DIR": str(self.var_dir),
+            runguard.RUN_ENV: str(self.var_dir),  # marks every process of this run (fleet/runguard.py)
             "PYTHONUNBUFFERED": "1",
         }
 
 
+# Heartbeat bounds (fleet/hangwatch.py): an alert past the first, a restart past the second. The links process is
+# alerted on within 2 s of hanging (issue 31: a frozen fleet must not look live); the scheduler's pass and a
+# worker's beat (from a thread) get more room: a busy database may rightly hold a pass for seconds.
+QUICK, ROOMY = Bounds(alert_s=1.0, restart_s=5.0), Bounds(alert_s=3.0, restart_s=15.0)
+HANGWATCH = Bounds(alert_s=10.0, restart_s=10.0)  # watched by `make run` itself: no alert, only a restart
+
+
 def programs(setup: Setup, python: str = sys.executable) -> list[Program]:
-    """The system's processes; the embedded Redis first (started with the supervisor, stopped last)."""
+    """The system's processes; the embedded Redis first (started with the supervisor, stopped last). Redis, the
+    scheduler and the links process are single (one per var folder, always: a lock each); the rest beat."""
     manage = [python, "manage.py"]
     celery = [python, "-m", "celery", "-A", "fleet", "-q", "worker", "-l", "warning"]
     sim_ports = ["--port-base", str(setup.sim_port_base)]
     web_options = ["--host", HOST, "--port", str(setup.port), "--log-level", "warning"]
-    web_options += ["--timeout-graceful-shutdown", "5"]
+    web_options += ["--timeout-graceful-shutdown", "5", "--no-proxy-headers"]  # portal/clientaddr.py decides
     listed = [
-        Program("web", [python, "-m", "uvicorn", "fleet.asgi:application", *web_options]),
+        Program("web", [python, "-m", "uvicorn", "fleet.asgi:application", *web_options], hung=QUICK),
         # Instructions block while robots move, so that worker runs many threads; stops and registrations
         # have a worker of their own and never wait behind a long instruction.
         Program(
-            "worker", [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "32"]
+            "worker",
+            [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "32"],
+            hung=ROOMY,
         ),
-        Program("control", [*celery, "-n", "control@%h", "-Q", "control,registration", "-c", "1"]),
-        Program("sim", [*manage, "simworker", "--world", setup.world, *sim_ports, *setup.sim_options]),
-        Program("links", [*manage, "robotlinks", "--register-world", setup.world, *sim_ports]),
+        Program(
+            "control", [*celery, "-n", "control@%h", "-Q", "control,registration", "-c", "1"], hung=ROOMY
+        ),
+        Program(
+            "sim", [*manage, "simworker", "--world", setup.world, *sim_ports, *setup.sim_options], hung=QUICK
+        ),
+        Program(
+            "links",
+            [*manage, "robotlinks", "--register-world", setup.world, *sim_ports],
+            single=True,
+            hung=QUICK,
+        ),
         # time slots, lost workers, stalled robot queues (issue 6)
-        Program("scheduler", [*manage, "scheduler"]),
+        Program("scheduler", [*manage, "scheduler"], single=True, hung=ROOMY),
     ]
+    watched = [f"{program.name}:{program.hung.alert_s:g}:{program.hung.restart_s:g}" for program in listed]
+    # restarts a hung process; it beats too, and `make run` itself restarts it if it hangs (wait_watching)
+    hangwatch = [python, "-m", "fleet.hangwatch", "--var-dir", str(setup.var_dir), *watched]
+    listed.append(Program("hangwatch", hangwatch, single=True, hung=HANGWATCH))
     if setup.redis_url is None:
         serve = [python, "-m", "fleet.embedded_redis", "serve", "--socket", str(setup.redis_socket)]
-        listed.insert(0, Program("redis", serve, autostart=True, priority=10, group=None))
+        listed.insert(0, Program("redis", serve, autostart=True, priority=10, group=None, single=True))
     return listed
 
 
@@ -109,12 +156,18 @@ def main() -> int:
 def run(setup: Setup) -> int:
     """Start the supervisor, bring the system up under it; return once the supervisor has stopped."""
     layout = Layout(setup.var_dir)
+    try:  # one run per var folder: nothing of an earlier one left, nothing else on our ports
+        lock = runguard.guard(setup.needs(), layout.run_lock, say=lambda line: print(line, flush=True))
+    except runguard.Refused as refused:
+        print(f"make run: {refused}", flush=True)
+        return 1
     listed = programs(setup)
     layout.log_dir.mkdir(parents=True, exist_ok=True)
     layout.config.write_text(render_config(listed, layout, BASE_DIR))
     # made before anything runs: what the logs held already is not repeated
     relay = LogRelay(layout, [program.name for program in listed])
-    supervisord = start_supervisord(layout, setup.env())
+    supervisord = start_supervisord(layout, setup.env(), keep_fds=(lock,))
+    os.close(lock)  # supervisord holds it now, for as long as it lives
     stopping = stop_on_signals(supervisord)
     relay.start()
     try:
@@ -140,16 +193,38 @@ def bring_up(setup: Setup, layout: Layout, supervisord: subprocess.Popen, stoppi
     proxy.supervisor.startAllProcesses(False)
     print(f"\n  Fleet portal: {setup.url}  (starting; Ctrl-C stops everything)\n", flush=True)
     threading.Thread(target=say_when_ready, args=(setup.url, login), name="announcement", daemon=True).start()
-    code = supervisord.wait()
+    code = wait_watching(layout, supervisord)
+    if not stopping.is_set() and code < 0:  # killed: its processes died with it (fleet/procwrap.py)
+        print(
+            f"make run: the supervisor was killed ({signal.Signals(-code).name}); every process went with it"
+        )
     return 0 if stopping.is_set() else code or 1
+
+
+def wait_watching(layout: Layout, supervisord: subprocess.Popen, period: float = 1.0) -> int:
+    """Wait for the supervisor to end; meanwhile restart the hang watcher if it stops beating (it watches the
+    others, and we watch it: nothing watches us but the person at the terminal)."""
+    while supervisord.poll() is None:
+        try:
+            supervisord.wait(timeout=period)
+        except subprocess.TimeoutExpired:
+            restart_if_hung(layout, "hangwatch", HANGWATCH)
+    return supervisord.returncode
+
+
+def restart_if_hung(layout: Layout, name: str, bounds: Bounds) -> None:
+    """Kill the process if it has not beaten within its bound (the supervisor starts it again)."""
+    try:
+        info = rpc(layout).supervisor.getProcessInfo(f"fleet:{name}")
+    except (OSError, http.client.HTTPException, xmlrpc.client.Error):
+        return  # the supervisor is busy or stopping: asked again next time
+    quiet = hangwatch.silence(info, layout.beat(name), time.time())
+    if quiet is not None and hangwatch.verdict(quiet, bounds) == "restart":
+        hangwatch.kill(quiet.pid, f"make run: {name} hung (no heartbeat for {quiet.seconds:.1f} s)")
 
 
 def wait_for_redis(socket_path: Path, supervisord: subprocess.Popen, timeout: float = 30.0) -> bool:
     """Whether the embedded Redis answers a PING within timeout (it replays its append-only file first)."""
-    import redis
-    from redis.backoff import NoBackoff
-    from redis.retry import Retry
-
     client = redis.Redis(unix_socket_path=str(socket_path), socket_timeout=1, retry=Retry(NoBackoff(), 0))
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and supervisord.poll() is None:

@@ -10,6 +10,7 @@ from pathlib import Path
 from fleet.env import (
     celery_broker_url,
     channels_host,
+    env_addresses,
     env_bool,
     env_database,
     env_int,
@@ -63,7 +64,8 @@ INSTALLED_APPS = [
 ]
 
 MIDDLEWARE = [
-    "django.middleware.security.SecurityMiddleware",
+    "django.middleware.security.SecurityMiddleware",  # nosniff, Referrer-Policy same-origin, COOP (defaults)
+    "portal.middleware.ContentSecurityPolicy",
     "whitenoise.middleware.WhiteNoiseMiddleware",
     "django.contrib.sessions.middleware.SessionMiddleware",
     "django.middleware.common.CommonMiddleware",
@@ -73,6 +75,7 @@ MIDDLEWARE = [
     "django.contrib.messages.middleware.MessageMiddleware",
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
     "axes.middleware.AxesMiddleware",  # last, as django-axes asks: turns a lockout into its 429 answer
+    "portal.middleware.StoreRefusals",  # Redis or the database refusing: 503 with the reason, not a bare 500
 ]
 
 ROOT_URLCONF = "fleet.urls"
@@ -107,7 +110,7 @@ CACHES = {
 
 CHANNEL_LAYERS = {
     "default": {
-        "BACKEND": "channels_redis.core.RedisChannelLayer",
+        "BACKEND": "fleet.channel_layer.RedisChannelLayer",  # fleet/channel_layer.py: one lock fix
         "CONFIG": {
             "hosts": [channels_host(REDIS_URL)],
             "capacity": 1000,
@@ -154,10 +157,16 @@ CELERY_RESULT_BACKEND_MAX_RETRIES = 10
 CELERY_REDIS_BACKEND_HEALTH_CHECK_INTERVAL = 10
 CELERY_REDIS_RETRY_ON_TIMEOUT = True
 
+# make test (fleet/testrun.py) sets FLEET_FAST_PASSWORD_HASH for itself and the servers its tests start: a
+# test suite logs hundreds of users in, and PBKDF2's 1,000,000 rounds per login were its largest CPU cost. Never
+# set it for a portal that people use.
+if env_bool("FLEET_FAST_PASSWORD_HASH", default=False):
+    PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
+
 AUTH_PASSWORD_VALIDATORS = [
     {"NAME": "django.contrib.auth.password_validation.MinimumLengthValidator", "OPTIONS": {"min_length": 8}},
 ]
-# --- security (issue 15; README "Security") ------------------------------------------------------------------
+# --- security (issue 15; docs/security.md) ------------------------------------------------------------------
 # One switch for deployments behind a TLS-terminating proxy: HSTS, secure cookies, SSL redirect, proxy header.
 FLEET_BEHIND_TLS = env_bool("FLEET_BEHIND_TLS", default=False)
 globals().update(
@@ -167,15 +176,35 @@ globals().update(
 SESSION_COOKIE_AGE = env_int("FLEET_SESSION_HOURS", 12, minimum=1, maximum=24 * 30) * 3600
 SESSION_COOKIE_HTTPONLY = True
 SESSION_COOKIE_SAMESITE = CSRF_COOKIE_SAMESITE = "Lax"
-# Login throttling (django-axes): after 5 wrong passwords for one username from one address, that pair is
-# refused (429) for 15 minutes; a success resets the count. Per pair, so nobody can lock the admin out from
-# elsewhere. Works for the login page and the admin's alike (both go through the authentication backends).
+# Login throttling (django-axes): 5 wrong passwords for one username (from any address), or from one address (for
+# any usernames), lock that username, or that address, out (429) for 15 minutes; a success resets the count. So a
+# guesser can neither spread one account's guesses over addresses nor one address's over accounts; the price is
+# that a guesser can lock an account out for the cool-off (`manage.py axes_reset_username` lifts it). Works for the
+# login page and the admin's alike (both go through the authentication backends).
 AUTHENTICATION_BACKENDS = ["axes.backends.AxesStandaloneBackend", "django.contrib.auth.backends.ModelBackend"]
 AXES_FAILURE_LIMIT = env_int("FLEET_LOGIN_ATTEMPTS", 5, minimum=1, maximum=100)
 AXES_COOLOFF_TIME = 0.25  # hours
-AXES_LOCKOUT_PARAMETERS = [["username", "ip_address"]]
+AXES_LOCKOUT_PARAMETERS = ["username", "ip_address"]  # either one past the limit locks
 AXES_RESET_ON_SUCCESS = True
+# The client's address: REMOTE_ADDR, or X-Forwarded-For only when the peer is one of these proxies (addresses or
+# CIDRs; default none). Behind the reference nginx, its address (deploy/nginx/fleet.conf). portal/clientaddr.py.
+FLEET_TRUSTED_PROXIES = env_addresses("FLEET_TRUSTED_PROXIES", [])
+AXES_CLIENT_IP_CALLABLE = "portal.clientaddr.client_address"
 AXES_VERBOSE = False
+# Content-Security-Policy on every answer (portal.middleware.ContentSecurityPolicy; Django 6 reads the same
+# setting): our own scripts, styles and sockets only; no inline script or style (data for a page goes in
+# json_script blocks, which never run); camera frames and the favicon are data: URLs; no page may be framed.
+SECURE_CSP = {
+    "default-src": ["'self'"],
+    "script-src": ["'self'"],
+    "style-src": ["'self'"],
+    "img-src": ["'self'", "data:"],
+    "connect-src": ["'self'"],
+    "object-src": ["'none'"],
+    "base-uri": ["'none'"],
+    "form-action": ["'self'"],
+    "frame-ancestors": ["'none'"],
+}
 # --- end of security ---------------------------------------------------------------------------------------
 
 LOGIN_URL = "login"
@@ -200,8 +229,14 @@ LOGGING = {
     "disable_existing_loggers": False,
     "formatters": {"short": {"format": "%(asctime)s %(levelname)s %(name)s: %(message)s"}},
     "handlers": {"console": {"class": "logging.StreamHandler", "formatter": "short"}},
+    "filters": {"one_line": {"()": "fleet.logfilters.OneLine"}},
     "root": {"handlers": ["console"], "level": "WARNING"},
-    "loggers": {name: {"level": "INFO"} for name in FLEET_APPS},
+    "loggers": {
+        **{name: {"level": "INFO"} for name in FLEET_APPS},
+        "django.request": {
+            "filters": ["one_line"]
+        },  # a refused request (403): one line; a 500 keeps its traceback
+    },
 }
 
 # The fleet's own knobs.
@@ -214,11 +249,16 @@ FLEET_DEMO_SCHEDULES = env_bool("FLEET_DEMO_SCHEDULES", default=False)
 FLEET_ADMIN_PASSWORD = env_str("FLEET_ADMIN_PASSWORD", min_length=8)
 FLEET_CONTROL_LEASE_SECONDS = 300
 FLEET_IDLE_TIMEOUT_SECONDS = 600
+# A question of the interpreter's nobody answers expires after this long (execution/sweeps.py): cancelled with a
+# note ("expired: no answer within 10 min"), its robots back to ready, gone from the console's Progress.
+FLEET_QUESTION_EXPIRY_SECONDS = env_int("FLEET_QUESTION_EXPIRY_SECONDS", 600, minimum=10)
 # Execution (issue 6): where instructions run (celery workers, or "thread" in-process for tests), an optional
 # queue override, and the Redis key prefix of robot locks and flags (distinct per test run).
 FLEET_EXECUTE = os.environ.get("FLEET_EXECUTE", "celery")
 FLEET_EXECUTE_QUEUE = os.environ.get("FLEET_EXECUTE_QUEUE", "")
 FLEET_EXEC_KEY_PREFIX = os.environ.get("FLEET_EXEC_KEY_PREFIX", "fleet:exec")
+# The links process's stop socket (robots/stopsocket.py): a fresh CLI's stop is zeroed there, on links kept up.
+FLEET_STOP_SOCKET = VAR_DIR / "proc" / "stop.sock"
 
 # ----- Robots are untrusted input (issue 15; robots/limits.py, robots/endpoints.py) -----
 # Caps on what one rosbridge endpoint may send: a WebSocket frame (and a reassembled fragmented message), the
@@ -228,6 +268,8 @@ FLEET_EXEC_KEY_PREFIX = os.environ.get("FLEET_EXEC_KEY_PREFIX", "fleet:exec")
 FLEET_ROBOT_MAX_FRAME_MB = env_int("FLEET_ROBOT_MAX_FRAME_MB", 16, minimum=1)
 FLEET_ROBOT_MAX_TOPICS = env_int("FLEET_ROBOT_MAX_TOPICS", 100_000, minimum=1)
 FLEET_ROBOT_MAX_URDF_MB = env_int("FLEET_ROBOT_MAX_URDF_MB", 4, minimum=1)
+# inbound frames per endpoint link and second; beyond it they are dropped, counted, the robot flagged, an alert raised
+FLEET_ROBOT_MAX_FRAMES_PER_S = env_int("FLEET_ROBOT_MAX_FRAMES_PER_S", 2000, minimum=10)
 # a whole endpoint's discovery (an endpoint with hundreds of namespaced robots takes longer than the default)
 FLEET_DISCOVERY_TIMEOUT_S = env_int("FLEET_DISCOVERY_TIMEOUT_S", 15, minimum=1, maximum=3600)
 FLEET_ROBOT_ALLOWED_NETWORKS = env_networks(

@@ -29,7 +29,17 @@ from supervisor.xmlrpc import SupervisorTransport
 
 START_SECONDS = 3  # a process up this long counts as started; one that dies sooner backs off
 START_RETRIES = 1000  # quick deaths in a row before supervisord gives up on a process (backing off: hours)
-LOG_BYTES, LOG_BACKUPS = 10 * 1024 * 1024, 2  # per process log under var/log/
+LOG_BYTES, LOG_BACKUPS = 10 * 1024 * 1024, 2  # per process log under var/log/ (Django's logs go there too)
+PROCWRAP = Path(__file__).resolve().with_name("procwrap.py")
+HEARTBEAT_ENV = "FLEET_HEARTBEAT"  # fleetcore.heartbeat.ENV: the file a watched process beats
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """How long a process may go without a heartbeat: an alert past alert_s, a restart past restart_s."""
+
+    alert_s: float
+    restart_s: float
 
 
 @dataclass(frozen=True)
@@ -43,6 +53,8 @@ class Program:
     priority: int = 100  # started in ascending order, stopped in descending order
     stop_seconds: int = 10  # after SIGTERM, then SIGKILL
     group: str | None = "fleet"  # a group's processes are stopped together; None: a group of its own
+    single: bool = False  # one per var folder, always: it holds var/proc/<name>.lock (fleet/procwrap.py)
+    hung: Bounds | None = None  # it beats (var/proc/<name>.beat); silent this long: alert, then restart
 
 
 @dataclass(frozen=True)
@@ -56,6 +68,10 @@ class Layout:
         return self.var_dir / "supervisord.conf"
 
     @property
+    def pidfile(self) -> Path:
+        return self.var_dir / "supervisord.pid"
+
+    @property
     def socket(self) -> Path:
         return self.var_dir / "supervisor.sock"
 
@@ -65,6 +81,21 @@ class Layout:
 
     def log(self, name: str) -> Path:
         return self.log_dir / f"{name}.log"
+
+    @property
+    def proc_dir(self) -> Path:
+        """The run's lock, each single process's lock and each watched process's heartbeat."""
+        return self.var_dir / "proc"
+
+    @property
+    def run_lock(self) -> Path:
+        return self.proc_dir / "run.lock"
+
+    def lock(self, name: str) -> Path:
+        return self.proc_dir / f"{name}.lock"
+
+    def beat(self, name: str) -> Path:
+        return self.proc_dir / f"{name}.beat"
 
 
 def render_config(programs: list[Program], layout: Layout, directory: Path) -> str:
@@ -78,7 +109,7 @@ def render_config(programs: list[Program], layout: Layout, directory: Path) -> s
         f"logfile_maxbytes = {LOG_BYTES}",
         f"logfile_backups = {LOG_BACKUPS}",
         "loglevel = info",
-        f"pidfile = {layout.var_dir / 'supervisord.pid'}",
+        f"pidfile = {layout.pidfile}",
         f"childlogdir = {layout.log_dir}",
         f"directory = {directory}",
         "",
@@ -103,9 +134,11 @@ def render_config(programs: list[Program], layout: Layout, directory: Path) -> s
 
 def program_section(program: Program, layout: Layout, directory: Path) -> list[str]:
     """One [program:x] section; `%` is supervisord's expansion character, so a literal one is doubled."""
+    beat = [f'environment = {HEARTBEAT_ENV}="{layout.beat(program.name)}"'] if program.hung else []
     return [
         f"[program:{program.name}]",
-        f"command = {shlex.join(program.command).replace('%', '%%')}",
+        f"command = {shlex.join(wrapped(program, layout)).replace('%', '%%')}",
+        *[line.replace("%", "%%") for line in beat],
         f"directory = {directory}",
         f"priority = {program.priority}",
         f"autostart = {str(program.autostart).lower()}",
@@ -123,14 +156,26 @@ def program_section(program: Program, layout: Layout, directory: Path) -> list[s
     ]
 
 
-def start_supervisord(layout: Layout, env: dict[str, str]) -> subprocess.Popen:
+def wrapped(program: Program, layout: Layout) -> list[str]:
+    """The program's command behind fleet/procwrap.py: it dies with the supervisor, a single one holds its lock."""
+    lock = ["--lock", str(layout.lock(program.name))] if program.single else []
+    parent = ["--parent-pidfile", str(layout.pidfile)]
+    return [sys.executable, "-I", str(PROCWRAP), *parent, *lock, "--", *program.command]
+
+
+def start_supervisord(
+    layout: Layout, env: dict[str, str], keep_fds: tuple[int, ...] = ()
+) -> subprocess.Popen:
     """supervisord in the foreground, as our child, in a process group of its own: the terminal's signals (a
     Ctrl-C, a hang-up, which supervisord would take as "reload") reach only us, and we tell it to stop. On Linux
-    it is also told to stop if we are killed."""
+    it is also told to stop if we are killed (and its processes die with it: fleet/procwrap.py). keep_fds: ours
+    it holds too (the run lock)."""
+    layout.proc_dir.mkdir(parents=True, exist_ok=True)
     return subprocess.Popen(
         [sys.executable, "-m", "supervisor.supervisord", "-c", str(layout.config)],
         env=env,
         stdout=subprocess.DEVNULL,
+        pass_fds=keep_fds,
         process_group=0,
         preexec_fn=_stop_with_parent if sys.platform == "linux" else None,
     )

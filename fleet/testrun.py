@@ -25,6 +25,7 @@ def main() -> int:
         )
         args = ["-m", "not browser", *args]
     os.environ.setdefault("FLEET_REDIS_PREFIX", f"test{os.getpid()}")  # this run's own keys and groups
+    os.environ.setdefault("FLEET_FAST_PASSWORD_HASH", "1")  # logins cheap for the suite (fleet/settings.py)
     os.environ.setdefault("PYTHONFAULTHANDLER", "1")  # a crash, even during interpreter exit, shows where
     command = [sys.executable, "-m", "pytest", *args]
     if not os.environ.get("REDIS_URL"):

@@ -11,3 +11,7 @@ urlpatterns = [
     path("api/", api.urls),
     path("", include("portal.urls")),
 ]
+
+handler500 = (
+    "portal.middleware.server_error"  # a store refusing, raised outside a view, is a 503 with its reason
+)

@@ -92,6 +92,15 @@ ROLES: dict[str, Role] = {
             "charge energy", "charge level",
         ),
         _role(
+            "speed_limit",
+            "nav2_msgs/SpeedLimit",
+            "sub",
+            "speed_limit",
+            "speed limit speed_limit",
+            "max_vel_x",
+            "the navigation stack's speed limit (nav2's controller topic, or move_base's local planner)",
+        ),
+        _role(
             "dock",
             "irobot_create_msgs/Dock",
             "sub",
@@ -105,6 +114,8 @@ ROLES: dict[str, Role] = {
 
 ESSENTIAL = ("move", "odometry")  # a robot without these cannot be driven at all
 NAV_ACTION_SERVERS = ("move_base", "navigate_to_pose")
+# move_base's local planner takes its top speed (max_vel_x) through this service: the speed_limit role's ROS 1 form
+RECONFIGURE = "dynamic_reconfigure/Reconfigure"
 
 
 def accepts(role: str, message_type: str) -> bool:

@@ -2,7 +2,8 @@
 
 A pose is (x, y, yaw) in metres and radians. Messages are the rosbridge JSON dicts of geometry_msgs and
 nav_msgs; readers are lenient (a missing field is zero) but never guess a type: a non-number raises
-ValueError or TypeError, which callers treat as a bad message from an untrusted robot.
+ValueError or TypeError, which callers treat as a bad message from an untrusted robot; a NaN or an infinity
+raises NonFinite (a ValueError) naming the field, so no such number ever becomes a pose.
 """
 
 from __future__ import annotations
@@ -13,6 +14,18 @@ Pose2D = tuple[float, float, float]
 ORIGIN: Pose2D = (0.0, 0.0, 0.0)
 
 
+class NonFinite(ValueError):
+    """A pose or twist field is NaN or infinite; the message says which ("x is NaN")."""
+
+
+def finite(name: str, value) -> float:
+    """The value as a float; NonFinite naming the field when it is NaN or infinite."""
+    number = float(value)
+    if not math.isfinite(number):
+        raise NonFinite(f"{name} is {'NaN' if math.isnan(number) else 'inf' if number > 0 else '-inf'}")
+    return number
+
+
 def wrap(angle: float) -> float:
     """The angle in (-pi, pi]."""
     return math.atan2(math.sin(angle), math.cos(angle))
@@ -20,7 +33,7 @@ def wrap(angle: float) -> float:
 
 def yaw_of(q: dict) -> float:
     """The yaw of a geometry_msgs/Quaternion dict (identity when all zero or missing)."""
-    x, y, z, w = (float(q.get(k, 0.0) or 0.0) for k in ("x", "y", "z", "w"))
+    x, y, z, w = (finite(f"orientation {k}", q.get(k, 0.0) or 0.0) for k in ("x", "y", "z", "w"))
     if x == y == z == w == 0.0:
         return 0.0
     return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
@@ -61,7 +74,7 @@ def pose_of(msg: dict) -> Pose2D:
     position = pose.get("position") if isinstance(pose, dict) else None
     if not isinstance(position, dict) or "x" not in position or "y" not in position:
         raise KeyError("no pose.position.x/y in the message")
-    return float(position["x"]), float(position["y"]), yaw_of(pose.get("orientation") or {})
+    return finite("x", position["x"]), finite("y", position["y"]), yaw_of(pose.get("orientation") or {})
 
 
 def twist_of(msg: dict) -> tuple[float, float]:
@@ -69,7 +82,7 @@ def twist_of(msg: dict) -> tuple[float, float]:
     twist = (msg.get("twist") or {}).get("twist") or {}
     linear = (twist.get("linear") or {}).get("x", 0.0) or 0.0
     angular = (twist.get("angular") or {}).get("z", 0.0) or 0.0
-    return float(linear), float(angular)
+    return finite("linear speed", linear), finite("angular speed", angular)
 
 
 def start_offset(start_pose) -> Pose2D:
@@ -78,11 +91,6 @@ def start_offset(start_pose) -> Pose2D:
         yaw = float(start_pose[2]) if len(start_pose) > 2 else 0.0
         return float(start_pose[0]), float(start_pose[1]), yaw
     return ORIGIN
-
-
-def map_pose(odometry: dict, start_pose) -> Pose2D:
-    """A robot's map pose from an Odometry message and its start pose."""
-    return compose(start_offset(start_pose), pose_of(odometry))
 
 
 def distance(a, b) -> float:

@@ -3,7 +3,8 @@
 The move-to-goal controller follows the paper's Figure 7: turn towards the goal, drive, correct the heading from
 odometry as it goes, and stop within a tolerance. Tasks: rotate(n) turns on the spot n times; clean drives a
 small coverage pattern around the location. A robot's map pose is its odometry composed with its start pose
-(or amcl_pose when the robot has one).
+(or amcl_pose when the robot has one). Each controller drives within the limits it is given: a step's pace
+(`fleetcore.speed.Pace.limits`), not the robot's own.
 """
 
 from __future__ import annotations
@@ -12,24 +13,13 @@ import math
 from dataclasses import dataclass, field
 
 from fleetcore.geometry import quaternion, wrap
-from fleetcore.steps import DEFAULT_SPEED, SPEEDS, parse_task
+from fleetcore.speed import Limits
+from fleetcore.steps import parse_task
 
 TOLERANCE = 0.1  # metres: arrived when this close to the goal
 TURN_FIRST = 0.5  # rad: turn on the spot while the heading error is larger than this
 K_ANGULAR, K_LINEAR = 2.5, 1.2
 CLEAN_SIZE, CLEAN_LANES = 0.6, 3  # metres square, back-and-forth lanes
-
-
-@dataclass(frozen=True)
-class Limits:
-    """A robot's velocity limits (m/s, rad/s)."""
-
-    linear: float
-    angular: float
-
-    def __post_init__(self):
-        if not (self.linear > 0 and self.angular > 0):
-            raise ValueError(f"limits must be positive, got linear={self.linear}, angular={self.angular}")
 
 
 @dataclass(frozen=True)
@@ -54,7 +44,6 @@ class GoToGoal:
 
     goal: tuple[float, float]
     limits: Limits
-    factor: float = SPEEDS[DEFAULT_SPEED]
     tolerance: float = TOLERANCE
 
     def command(self, pose: tuple[float, float, float]) -> Command:
@@ -64,7 +53,7 @@ class GoToGoal:
         if distance < self.tolerance:
             return STOP
         error = wrap(math.atan2(dy, dx) - yaw)
-        w_max, v_max = self.limits.angular * self.factor, self.limits.linear * self.factor
+        w_max, v_max = self.limits.angular, self.limits.linear
         w = clamp(K_ANGULAR * error, w_max)
         if abs(error) > TURN_FIRST:
             return Command(0.0, _at_least(w, 0.15 * w_max))
@@ -83,7 +72,6 @@ class Rotate:
 
     turns: float
     limits: Limits
-    factor: float = SPEEDS[DEFAULT_SPEED]
     turned: float = 0.0
     _last: float | None = None
 
@@ -95,7 +83,7 @@ class Rotate:
         remaining = 2 * math.pi * self.turns - self.turned
         if remaining <= 0.05:
             return STOP
-        w_max = self.limits.angular * self.factor
+        w_max = self.limits.angular
         return Command(0.0, max(min(w_max, K_ANGULAR * remaining), 0.2 * w_max))
 
 
@@ -105,7 +93,6 @@ class Straight:
 
     distance: float
     limits: Limits
-    factor: float = SPEEDS[DEFAULT_SPEED]
     tolerance: float = 0.02
     start: tuple[float, float, float] | None = None
 
@@ -118,7 +105,7 @@ class Straight:
         remaining = abs(self.distance) - along
         if remaining <= self.tolerance:
             return STOP
-        v_max, w_max = self.limits.linear * self.factor, self.limits.angular * self.factor
+        v_max, w_max = self.limits.linear, self.limits.angular
         v = min(v_max, max(K_LINEAR * remaining, 0.25 * v_max))
         return Command(sign * v, clamp(K_ANGULAR * wrap(yaw0 - pose[2]), w_max))
 
@@ -129,7 +116,6 @@ class TurnBy:
 
     angle: float
     limits: Limits
-    factor: float = SPEEDS[DEFAULT_SPEED]
     tolerance: float = 0.03
     turned: float = 0.0
     _last: float | None = None
@@ -141,7 +127,7 @@ class TurnBy:
         remaining = self.angle - self.turned
         if abs(remaining) <= self.tolerance:
             return STOP
-        w_max = self.limits.angular * self.factor
+        w_max = self.limits.angular
         return Command(0.0, _at_least(clamp(K_ANGULAR * remaining, w_max), 0.15 * w_max))
 
 
@@ -151,14 +137,13 @@ class Face:
 
     yaw: float
     limits: Limits
-    factor: float = SPEEDS[DEFAULT_SPEED]
     tolerance: float = 0.05  # rad
 
     def command(self, pose: tuple[float, float, float]) -> Command:
         error = wrap(self.yaw - pose[2])
         if abs(error) <= self.tolerance:
             return STOP
-        w_max = self.limits.angular * self.factor
+        w_max = self.limits.angular
         return Command(0.0, math.copysign(max(min(w_max, K_ANGULAR * abs(error)), 0.2 * w_max), error))
 
 
@@ -184,7 +169,6 @@ class Clean:
 
     center: tuple[float, float]
     limits: Limits
-    factor: float = SPEEDS[DEFAULT_SPEED]
     legs: list[tuple[float, float]] = field(default_factory=list)
 
     def __post_init__(self):
@@ -192,19 +176,19 @@ class Clean:
 
     def command(self, pose: tuple[float, float, float]) -> Command:
         while self.legs:
-            command = GoToGoal(self.legs[0], self.limits, self.factor, tolerance=0.12).command(pose)
+            command = GoToGoal(self.legs[0], self.limits, tolerance=0.12).command(pose)
             if not command.done:
                 return command
             self.legs.pop(0)
         return STOP
 
 
-def task_controller(task: str, pose, limits: Limits, factor: float):
+def task_controller(task: str, pose, limits: Limits):
     """The controller for a task started at this pose."""
     name, count = parse_task(task)
     if name == "rotate":
-        return Rotate(count, limits, factor)
-    return Clean((pose[0], pose[1]), limits, factor)
+        return Rotate(count, limits)
+    return Clean((pose[0], pose[1]), limits)
 
 
 # ----- messages: how commands and goals look on the wire, per ROS version and message type -----
@@ -319,6 +303,37 @@ def goal_id(goal: str, t: float = 0.0) -> dict:
 def navigate_to_pose_goal(x: float, y: float, yaw: float, t: float) -> dict:
     """The goal of nav2's navigate_to_pose action."""
     return {"pose": pose_stamped(x, y, yaw, t, 2), "behavior_tree": ""}
+
+
+def cancel_all_goals() -> dict:
+    """An action_msgs/srv/CancelGoal request that cancels every goal of a ROS 2 action (zero goal id and stamp),
+    whoever sent them."""
+    return {"goal_info": {"goal_id": {"uuid": [0] * 16}, "stamp": stamp(0.0, 2)}}
+
+
+def speed_limit(percent: float | None, t: float) -> dict:
+    """A nav2_msgs/msg/SpeedLimit in percent of the controller's top speed; None (0.0 on the wire) lifts it."""
+    return {"header": header("", t, 2), "percentage": True, "speed_limit": float(percent or 0.0)}
+
+
+def reconfigure(doubles: dict[str, float]) -> dict:
+    """A dynamic_reconfigure/Reconfigure request setting these double parameters (an empty one reads them)."""
+    return {"config": {"doubles": [{"name": k, "value": float(v)} for k, v in doubles.items()]}}
+
+
+def reconfigured(reply: dict, name: str) -> float | None:
+    """A double parameter's value in a dynamic_reconfigure/Reconfigure reply, None when absent or not a number."""
+    config = reply.get("config") if isinstance(reply, dict) else None
+    for item in (config or {}).get("doubles") or []:
+        value = item.get("value") if isinstance(item, dict) and item.get("name") == name else None
+        if (
+            isinstance(value, int | float)
+            and not isinstance(value, bool)
+            and math.isfinite(value)
+            and value > 0
+        ):
+            return float(value)
+    return None
 
 
 def move_base_outcome(status_array: dict, goal: str) -> str | None:

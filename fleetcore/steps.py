@@ -3,24 +3,22 @@
 A step is one action for some robots: where to (a destination), what to do there (a task such as rotate(3) or
 clean), how fast (a speed word), how much (an amount in the unit its action measures: metres for move_by,
 degrees for turn_by, seconds for wait, times for repeat) and, for a repeat, how many steps before it it repeats
-(span; a repeat without an amount runs until the robot is stopped). Robots are names, "all", "any", or a
-subject object {"all"|"any": true, "model": word, "except": [names]} ("every robot except husky", "a turtlebot"). It travels as a dict (JSON in the database and on the wire) and is checked by
-`Step.from_dict`, which raises StepError with a sentence for a person. Speed words live here, once: the
-interpreter's phrases map onto them and the executor turns them into a fraction of each robot's limits.
+(span; a repeat without an amount runs until the robot is stopped). Its robots are a `fleetcore.choice.RobotChoice`
+(names, all, any, a kind, an exclusion). It travels as a dict (JSON in the database and on the wire) and is checked by
+`Step.from_dict`, which raises StepError with a sentence for a person. Speed words live in `fleetcore.speed`:
+the interpreter's phrases map onto them and `Step.pace` turns them into the limits each robot is driven at.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 from fleetcore import actions
+from fleetcore import speed as speeds  # (a Step's field is named speed)
+from fleetcore.choice import ChoiceError, RobotChoice
 
-# A speed word -> the fraction of each robot's own velocity limits it asks for. None means "normal".
-SPEEDS: dict[str, float] = {"very slow": 0.2, "slow": 0.35, "normal": 0.6, "fast": 0.85, "very fast": 1.0}
-DEFAULT_SPEED = "normal"
-ALL, ANY = "all", "any"  # every free robot; the one best robot (allocation)
 # Unit words -> (unit, factor to it). The interpreter's phrases of amounts map onto these, the handlers read the
 # unit of their action (fleetcore.actions.Action.unit).
 UNITS: dict[str, tuple[str, float]] = {
@@ -58,14 +56,6 @@ class StepError(ValueError):
     """A step the executor cannot run; the message says why, for a person."""
 
 
-def speed_factor(word: str | None) -> float:
-    """The fraction of a robot's limits a speed word asks for; StepError for a word nobody defined."""
-    key = DEFAULT_SPEED if word is None or word == "" else str(word).strip().lower()
-    if key not in SPEEDS:
-        raise StepError(f"unknown speed {word!r}; say one of: {', '.join(SPEEDS)}")
-    return SPEEDS[key]
-
-
 def parse_task(task: str) -> tuple[str, float]:
     """("rotate", 3) from "rotate(3)" (a quarter turn: "rotate(0.25)"); ("clean", 1) from "clean"; else StepError."""
     match = TASK_RE.match(re.sub(r"\s+", "", str(task or "")).lower())
@@ -90,6 +80,15 @@ class Destination:
     y: float
     around: str | None = None  # the place asked for, when the robot was given a free spot next to it
     yaw: float | None = None  # the heading to end with (rad, map frame), when one was given
+    center: tuple[float, float] | None = None  # where the place asked for is (with `around`)
+    taken_by: str | None = None  # who took the place (with `around`): "husky", "husky's goal"
+
+    @property
+    def place(self) -> tuple[str, tuple[float, float]]:
+        """The place asked for and where it is: the destination itself, or the one its free spot is next to."""
+        if self.around and self.center is not None:
+            return self.around, self.center
+        return self.name, (self.x, self.y)
 
     @classmethod
     def from_dict(cls, data) -> Destination:
@@ -107,30 +106,30 @@ class Destination:
             isinstance(yaw, bool) or not isinstance(yaw, int | float) or not math.isfinite(yaw)
         ):
             raise StepError("a destination's yaw must be a finite number (radians)")
-        return cls(name, x, y, str(around) if around else None, None if yaw is None else float(yaw))
+        return cls(
+            name,
+            x,
+            y,
+            str(around) if around else None,
+            None if yaw is None else float(yaw),
+            _point(data.get("center")),
+            str(data["taken_by"]) if data.get("taken_by") else None,
+        )
 
 
-@dataclass(frozen=True)
-class Subject:
-    """Robots chosen by kind rather than by name: every one (all) or the one best (any), of a model, but some."""
-
-    mode: str  # ALL or ANY
-    model: str | None = None  # a kind word ("turtlebot", "legged"): only robots of that kind
-    exclude: tuple[str, ...] = ()
-
-    def to_dict(self) -> dict:
-        out: dict = {self.mode: True}
-        if self.model:
-            out["model"] = self.model
-        if self.exclude:
-            out["except"] = list(self.exclude)
-        return out
+def _point(value) -> tuple[float, float] | None:
+    """(x, y) from [x, y] of finite numbers; None for anything else (a step written before it was kept)."""
+    try:
+        x, y = (float(v) for v in value)
+    except (TypeError, ValueError):
+        return None
+    return (x, y) if math.isfinite(x) and math.isfinite(y) else None
 
 
 @dataclass(frozen=True)
 class Step:
     action: str
-    robots: tuple[str, ...] | str | Subject  # names, or ALL, or ANY, or a Subject
+    robots: RobotChoice
     destination: Destination | None = None
     task: str | None = None
     speed: str | None = None
@@ -146,9 +145,9 @@ class Step:
         """The priority of the step's activity: the state its action puts the robot in (a task: work)."""
         return actions.ACTIONS["clean"].priority if self.task else self.spec.priority
 
-    @property
-    def factor(self) -> float:
-        return speed_factor(self.speed)
+    def pace(self, limits: speeds.Limits) -> speeds.Pace:
+        """What this step's speed word asks of a robot with these limits (fleetcore.speed.pace)."""
+        return speeds.pace(self.speed, limits)
 
     @classmethod
     def from_dict(cls, data) -> Step:
@@ -168,29 +167,24 @@ class Step:
         task = data.get("task") or None
         if task is not None:
             parse_task(task)
-        speed = data.get("speed") or None
-        speed_factor(speed)
+        said = data.get("speed") or None
+        try:
+            speeds.word(said)
+        except speeds.UnknownSpeed as exc:
+            raise StepError(str(exc)) from None
         amount, span = _amount(spec, data.get("amount")), _span(spec, data.get("span"))
-        return cls(name, _robots(data.get("robots")), destination, task, speed, amount, span)
+        return cls(name, _robots(data.get("robots")), destination, task, said, amount, span)
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        robots = self.robots
-        out["robots"] = (
-            list(robots)
-            if isinstance(robots, tuple)
-            else robots.to_dict()
-            if isinstance(robots, Subject)
-            else robots
-        )
+        out["robots"] = self.robots.to_wire()
         for key in ("amount", "span"):
             if out[key] is None:
                 del out[key]
+        for key in ("center", "taken_by"):  # (kept only for a free spot next to a place)
+            if out["destination"] and out["destination"][key] is None:
+                del out["destination"][key]
         return out
-
-    def for_robot(self, name: str, destination: Destination | None = None) -> Step:
-        """This step as one robot's share of it (its own spot, when it was given one)."""
-        return replace(self, robots=(name,), destination=destination or self.destination)
 
 
 _UNIT_WORDS = {"m": "metres", "deg": "degrees", "s": "seconds", "times": "times"}
@@ -226,34 +220,11 @@ def _span(spec: actions.Action, value) -> int | None:
     return value
 
 
-def _robots(value) -> tuple[str, ...] | str | Subject:
-    if value in (None, "", ANY):
-        return ANY
-    if value == ALL:
-        return ALL
-    if isinstance(value, dict):
-        return _subject(value)
-    if isinstance(value, list | tuple) and not value:
-        raise StepError("Say which robot should do it (a name, 'all robots' or 'any robot').")
-    if isinstance(value, list | tuple) and all(isinstance(v, str) and v for v in value):
-        return tuple(value)
-    raise StepError("robots is a list of robot names, 'all' or 'any'")
-
-
-def _subject(value: dict) -> Subject:
-    modes = [mode for mode in (ALL, ANY) if value.get(mode) is True]
-    model, exclude = value.get("model") or None, value.get("except") or []
-    unknown = set(value) - {ALL, ANY, "model", "except"}
-    if (
-        len(modes) != 1
-        or unknown
-        or not (model is None or isinstance(model, str))
-        or not (isinstance(exclude, list) and all(isinstance(name, str) and name for name in exclude))
-    ):
-        raise StepError(
-            'robots as an object is {"all": true} or {"any": true}, with "model" and "except" if any'
-        )
-    return Subject(modes[0], model, tuple(exclude))
+def _robots(value) -> RobotChoice:
+    try:
+        return RobotChoice.of(value)
+    except ChoiceError as exc:
+        raise StepError(str(exc)) from None
 
 
 def validate(steps) -> list[Step]:

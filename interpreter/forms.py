@@ -6,6 +6,7 @@ The parser fills slots word by word; these passes then settle what the slots mea
 - a loop action (`loop_of`, patrol) over several destinations is one loop of visits, and a repeat repeats the
   steps before it: rounds said with a number are written out, "until stopped" ends in a repeat step;
 - robots chosen by kind ("a turtlebot", "every robot except husky") are a subject object of the step contract.
+And each step is read back in words (`read_back`): what the console's parse line and "Understood: ..." say.
 """
 
 from __future__ import annotations
@@ -13,10 +14,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 from fleetcore.actions import ACTIONS
-from fleetcore.steps import ALL, ANY
+from fleetcore.choice import ALL, ANY, ChoiceError, RobotChoice
+from fleetcore.steps import StepError, parse_task
 
 MEASURED_UNITS = ("m", "deg", "s")
 MAX_STEPS = 200  # steps one instruction may expand to (a loop said with a number of rounds is written out)
+AMOUNT_SHOWN = {"m": "{:g} m", "deg": "{:g}°", "s": "{:g} s", "times": "{:g} times"}
 
 
 def measure(draft) -> tuple[list, str | None]:
@@ -144,3 +147,47 @@ def robots_of(draft, unnamed: str):
             subject["except"] = list(draft.exclude)
         return subject
     return mode or unnamed
+
+
+def read_back(step: dict) -> str:
+    """The step in words: "rotate tiago 3 times", "move husky to B, then rotate 2 times", "move a robot the
+    portal chooses to A", "turn_by tiago 90°". A task that is the step's own action is said with its count."""
+    if step.get("instruction") is not None:  # "cancel #12"
+        return f"{step.get('action')} #{step['instruction']}"
+    words = [step.get("action") or "?", robots_in_words(step.get("robots"))]  # "?": an action not understood
+    spec = ACTIONS.get(step.get("action") or "")
+    if step.get("amount") is not None and spec is not None and spec.unit in AMOUNT_SHOWN:
+        words.append(AMOUNT_SHOWN[spec.unit].format(step["amount"]))
+    if step.get("span"):
+        words.append(f"the {step['span']} step(s) before, until stopped")
+    if step.get("destination"):
+        at = "at" if spec is not None and spec.category == "task" else "to"  # clean tiago at Room 3
+        words.append(f"{at} {_place_in_words(step['destination'])}")
+    text = " ".join(words)
+    if step.get("task"):
+        name, times = _task(step["task"])
+        times = f" {times:g} times" if times != 1 else ""
+        text += times if name == step.get("action") else f", then {name}{times}"
+    return text + (f", {step['speed']}" if step.get("speed") else "")
+
+
+def robots_in_words(robots) -> str:
+    """Names; ALL: "every robot"; ANY (none named): "a robot the portal chooses" (its answer says whom and why);
+    a subject by kind: "a turtlebot the portal chooses", "every robot except husky"."""
+    try:
+        return RobotChoice.of(robots).words()
+    except ChoiceError:  # the contract refuses it elsewhere
+        return "a robot the portal chooses"
+
+
+def _place_in_words(destination: dict) -> str:
+    if destination.get("name"):
+        return destination["name"]
+    return f"({destination.get('x', 0):g}, {destination.get('y', 0):g})"
+
+
+def _task(task: str) -> tuple[str, float]:
+    try:
+        return parse_task(task)
+    except StepError:  # the contract refuses it elsewhere; say it as it came
+        return str(task), 1

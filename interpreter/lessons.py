@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from interpreter.parser import normalize, tokenize
+from interpreter.tokens import normalize, tokenize
 
 EXAMPLES = (
     "proceed means move",

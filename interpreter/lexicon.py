@@ -1,4 +1,4 @@
-"""The words the parser knows: ontology terms, the fleet's names and a little grammar (no Django).
+"""The words the parser knows: ontology terms, the fleet's names and the grammar's words (fleetcore.grammar; no Django).
 
 A `Grammar` is built once per (ontology version, fleet version) and then only read, so that
 interpreting one instruction is a handful of dict look-ups per word.
@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from rapidfuzz import process
 from rapidfuzz.distance import OSA
 
+from fleetcore.choice import kind_words
+from fleetcore.grammar import COUNT_WORDS, GRAMMAR, SPEED_PHRASES
 from fleetcore.steps import DIRECTIONS, UNITS
 from interpreter.terms import Terms, class_ancestry
 
@@ -20,44 +22,11 @@ WORD_RE = re.compile(
     r"[^\W_]+(?:['’_-][^\W_]+)*|\d+(?:\.\d+)?"
 )  # a name may hold _ and - (turtlebot3_burger_2, robot-7)
 
-# The phrases of each speed word of the step contract (fleetcore.steps.SPEEDS): one key each, no more.
-_SPEED_PHRASES = {
-    "very slow": "very slowly|very slow|really slowly|extremely slowly|at a crawl",
-    "slow": "slowly|slow|carefully|gently|cautiously|slower",
-    "normal": "normally|normal speed|at normal speed",
-    "fast": "fast|quickly|quick|rapidly|swiftly|faster|hurry|speedily",
-    "very fast": "very fast|very quickly|really fast|full speed|at full speed|top speed|max speed"
-    "|as fast as possible|as fast as you can|asap",
-}
-_GRAMMAR = {
-    "ALL": "all|every|each|everyone|everybody|everything|whole fleet|the whole fleet|fleet|all of you",
-    "THEN": "then|and then|after that|and after that|afterwards|next|and next|later|finally|followed by",
-    "AND": "and|plus|also|as well as|&",
-    "TIMES": "times|time|x|rounds|round|turns|laps|loops",
-    "PREP": "to|towards|toward|into|in to|at|till|until|onto|unto|on|up to|over to|as far as|in|inside|from|between",
-    "EXCEPT": "except|except for|but|but not|other than|apart from|besides|excluding|save for|not including",
-    "ANY": "any|any one|anyone|anybody|someone|somebody|whichever|nearest|the nearest|closest|the closest"
-    "|nearest free|the nearest free|closest free|the closest free|a free|any free|any available|an available"
-    "|first free|the first free|one of the|any one of the|any of the|a single",
-    "NOT": "not|do not|don't|don’t|dont|never|without|no|do n't|please don't|please do not|must not|mustn't",
-    "FOREVER": "until stopped|until i say stop|until told to stop|until told otherwise|until further notice"
-    "|forever|continuously|indefinitely|nonstop|non-stop|endlessly|over and over|again and again|on repeat"
-    "|in a loop|until i stop you|until you are stopped|until stop|until i say so|all day|round the clock",
-    "FILLER": "right now|right away|first|firstly|for|by|doing|do|done|please first|to start with",
-}
-
 
 def _words(text: str) -> frozenset[str]:
     return frozenset(text.split())
 
 
-_COUNT_WORDS = {
-    "once": 1, "twice": 2, "thrice": 3, "one": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6,
-    "seven": 7, "eight": 8, "nine": 9, "ten": 10, "eleven": 11, "twelve": 12, "thirteen": 13, "fourteen": 14,
-    "fifteen": 15, "sixteen": 16, "seventeen": 17, "eighteen": 18, "nineteen": 19, "twenty": 20, "thirty": 30,
-    "forty": 40, "fifty": 50, "sixty": 60, "seventy": 70, "eighty": 80, "ninety": 90, "hundred": 100,
-    "half": 0.5, "quarter": 0.25, "a hundred": 100, "one hundred": 100,
-}  # fmt: skip
 FILLERS = _words(
     """please pls plz kindly the a an robot robots bot bots can could would will you u should shall
     must i we want need like me us let lets let's ahead just now right away immediately straight directly
@@ -121,6 +90,16 @@ def phrase_key(text: str) -> tuple[str, ...]:
     return tuple(w.casefold() for w in WORD_RE.findall(text))
 
 
+def grammar_phrases(kind: str) -> set[tuple[str, ...]]:
+    """The phrases of one grammar word kind ("ALL", "AND", "THEN", ...), as token tuples."""
+    return {phrase_key(phrase) or (phrase,) for phrase in GRAMMAR[kind].split("|")}
+
+
+def grammar_words() -> set[str]:
+    """Every word of the little grammar (all kinds)."""
+    return {word for kind in GRAMMAR for phrase in grammar_phrases(kind) for word in phrase}
+
+
 def key_variants(text: str) -> set[tuple[str, ...]]:
     """Spellings of a name a person may type: 'Room 1', 'room1', 'robot 1', 'tb3 nav2'."""
     words = phrase_key(text.replace("_", " ")) or ()
@@ -138,23 +117,6 @@ def plural_forms(word: str) -> set[str]:
     if word.endswith("y") and len(word) > 2:
         forms.add(word[:-1] + "ies")
     return forms
-
-
-def kind_words(model: str, drive: str) -> set[str]:
-    """Words that name a robot kind: 'turtlebot3_burger' gives turtlebot3, turtlebot, burger."""
-    words = set()
-    model = model.casefold().strip()
-    if model:
-        words.add(model.replace("_", " "))
-        for part in re.split(r"[_\-\s]+", model):
-            if len(part) >= 3:
-                words.add(part)
-                stem = part.rstrip("0123456789")
-                if len(stem) >= 3:
-                    words.add(stem)
-    if drive in {"wheeled", "legged"}:
-        words.add(drive)
-    return words
 
 
 class Lexicon:
@@ -188,15 +150,6 @@ class Lexicon:
         accepts = frozenset(name for name, anc in chain.items() if set(anc) & set(a.accepts))
         return ActionSpec(
             a.name, a.category, a.takes_destination, a.requires_destination, a.countable, accepts
-        )
-
-    def signature(self) -> tuple:
-        """Return a comparable summary (used to check the owlready2 path against the plain one)."""
-        return (
-            sorted(self.actions.values(), key=lambda s: s.name),
-            sorted((k, v.value, v.synonym) for k, v in self.action_phrases.items()),
-            sorted((k, v.value, v.synonym) for k, v in self.concept_phrases.items()),
-            sorted(self.concepts.items()),
         )
 
 
@@ -245,13 +198,13 @@ class Grammar:
             self.table.setdefault(key, []).append(meaning)
 
     def _add_grammar(self) -> None:
-        for kind, spec in _GRAMMAR.items():
+        for kind, spec in GRAMMAR.items():
             for phrase in spec.split("|"):
                 self._add(phrase_key(phrase) or (phrase,), Meaning(kind, phrase))
-        for canonical, spec in _SPEED_PHRASES.items():
+        for canonical, spec in SPEED_PHRASES.items():
             for phrase in spec.split("|"):
                 self._add(phrase_key(phrase), Meaning("SPEED", canonical))
-        for word, n in _COUNT_WORDS.items():
+        for word, n in COUNT_WORDS.items():
             self._add(phrase_key(word), Meaning("NUMBER", float(n)))
         for word, unit in UNITS.items():
             self._add(phrase_key(word) or (word,), Meaning("UNIT", unit))

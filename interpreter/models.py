@@ -7,6 +7,7 @@ from django.db.models import Q
 from django.utils import timezone
 
 from interpreter.terms import ActionTerm, ClassTerm, ConceptTerm, KeywordTerm, SynonymTerm, Terms
+from robots.models import Robot
 
 identifier = RegexValidator(
     r"^[A-Za-z][A-Za-z0-9_]*$", "Use letters, digits and underscores, starting with a letter."
@@ -160,8 +161,6 @@ class OntologyVersion(models.Model):
 
 def load_terms() -> Terms:
     """Read every editable term from the database."""
-    from robots.models import Robot
-
     actions = [
         ActionTerm(
             a.name, a.category, a.takes_destination, a.requires_destination, a.countable,

@@ -1,21 +1,19 @@
 """Turn one instruction in words into checked steps, with the paper's Table 9 type (no Django).
 
 Pipeline, each pass linear in the length of the text:
-tokens (regex) -> items (longest phrase match in the Grammar's table, typo correction) ->
-step drafts (slot filling) -> semantic checks (the paper's Figure 8: allValuesFrom as sets) -> Interpretation.
+tokens (regex) -> items (longest phrase match in the Grammar's table, typo correction: interpreter/tokens.py) ->
+step drafts (slot filling, here, into interpreter/drafts.py's StepDraft) -> semantic checks (the paper's Figure 8: allValuesFrom as sets) -> the typed
+Interpretation (fleetcore.interpretation).
 """
 
 from __future__ import annotations
 
-import math
-import re
-import unicodedata
-from dataclasses import dataclass, field
-
 from fleetcore.actions import ACTIONS
-from fleetcore.steps import ANY
+from fleetcore.choice import ANY
+from fleetcore.interpretation import Interpretation
 from interpreter import forms
-from interpreter.lexicon import Grammar, Meaning, Place, phrase_key
+from interpreter.drafts import Dest, StepDraft
+from interpreter.lexicon import Grammar, Place, phrase_key
 from interpreter.problems import (
     DEST_CHECKS,
     LOOP_PROBLEMS,
@@ -28,248 +26,10 @@ from interpreter.problems import (
     stray_word,
     unknown_verb,
 )
+from interpreter.tokens import Item, Lexer, fmt, merge_numbers, normalize, tokenize
 
 MAX_WORDS = 300
-_INVISIBLE_RE = re.compile("[\u00ad\u180e\u200b-\u200f\u202a-\u202e\u2060-\u2064\ufeff]")
-_NUM = r"[-+]?\d+(?:\.\d+)?"
-_TOKEN_RE = re.compile(
-    rf"""(?P<coord>[(\[]\s*(?P<cx>{_NUM})\s*[,;]?\s*(?P<cy>{_NUM})\s*[)\]])
-    |(?P<xy>(?<![^\W\d_])x\s*[:=]?\s*(?P<xx>{_NUM})\s*,?\s*(?:and\s+)?y\s*[:=]?\s*(?P<yy>{_NUM}))
-    |(?P<num>{_NUM})(?P<suffix>cm|mm|m|secs|sec|s|mins|min|deg|x|°)?(?!\w)
-    |(?P<word>°|[^\W_]+(?:['’_-][^\W_]+)*)
-    |(?P<stop>[;.!?]+)
-    |(?P<comma>,)""",
-    re.X | re.I,
-)
 _SLOTLESS = {"FILLER", "AND", "COMMA", "TIMES"}
-
-
-@dataclass(slots=True)
-class Item:
-    kind: str
-    value: object
-    text: str
-    synonym: str | None = None
-    corrected_from: str | None = None
-
-
-@dataclass
-class Dest:
-    kind: str  # place | concept | unknown | classword | missing_place
-    name: str
-    x: float | None = None
-    y: float | None = None
-    cls: str | None = None
-
-    def as_dict(self) -> dict:
-        return {"name": self.name, "x": self.x, "y": self.y}
-
-
-@dataclass
-class StepDraft:
-    action: str | None = None
-    unknown_verb: str | None = None
-    robots: list[str] = field(default_factory=list)
-    all: bool = False
-    dest: Dest | None = None
-    task_action: str | None = None
-    count: int | None = None
-    speed: str | None = None
-    continuation: bool = False
-    amount: float | None = None  # said with a unit (in that unit, after its factor)
-    unit: str | None = None
-    direction: tuple | None = None  # (unit, sign, amount meant when none is said)
-    forever: bool = False
-    negated: bool = False
-    any: bool = False
-    model: str | None = None
-    exclude: list[str] = field(default_factory=list)
-    loop: int | None = None  # the loop (patrol) this visit belongs to
-    inherited_action: bool = False
-
-    def empty(self) -> bool:
-        return not (
-            self.action
-            or self.unknown_verb
-            or self.robots
-            or self.all
-            or self.dest
-            or self.task_action
-            or self.amount is not None
-            or self.direction
-        )
-
-
-@dataclass
-class Interpretation:
-    """The result: steps plus the paper's instruction type and, when needed, a question."""
-
-    type: str
-    steps: list[dict]
-    synonyms_used: dict[str, str]
-    reason: str
-    question: str | None = None
-    corrections: dict[str, str] = field(default_factory=dict)
-    problems: list[Problem] = field(default_factory=list)
-    not_done: list[str] = field(default_factory=list)  # what the text said not to do
-
-    @property
-    def valid(self) -> bool:
-        return self.type in {"I", "II"}
-
-    def as_dict(self) -> dict:
-        """Return the JSON shape of the interpreter's API."""
-        return {
-            "type": self.type,
-            "valid": self.valid,
-            "needs_user": not self.valid,
-            "question": self.question,
-            "steps": self.steps,
-            "synonyms_used": self.synonyms_used,
-            "reason": self.reason,
-            "answer_example": next((p.example for p in self.problems if p.example), None),
-        }
-
-
-def normalize(text: str) -> str:
-    """Fold compatibility characters, drop invisible ones and control characters."""
-    text = unicodedata.normalize("NFKC", text)
-    text = _INVISIBLE_RE.sub("", text)
-    return "".join(ch if ch.isprintable() else " " for ch in text)
-
-
-def tokenize(text: str) -> list[tuple[str, str, object]]:
-    """Split text into (kind, lower-case text, value) tokens; kinds W N C S M."""
-    tokens = []
-    for m in _TOKEN_RE.finditer(text):
-        group = "num" if m.group("num") is not None else m.lastgroup
-        if group in {"coord", "xy"}:
-            a, b = (m.group("cx"), m.group("cy")) if group == "coord" else (m.group("xx"), m.group("yy"))
-            tokens.append(("C", m.group(), _coords(a, b)))
-        elif group == "num":
-            tokens.append(("N", m.group("num"), _number(m.group("num"))))
-            if m.group("suffix"):
-                tokens.append(("W", m.group("suffix").casefold(), m.group("suffix")))
-        elif group == "word":
-            tokens.append(("W", m.group().casefold(), m.group()))
-        else:
-            tokens.append(("S" if group == "stop" else "M", m.group(), None))
-    return tokens
-
-
-def _number(text: str) -> float | None:
-    try:
-        value = float(text)
-    except ValueError:
-        return None
-    return value if math.isfinite(value) else None
-
-
-def _coords(a: str, b: str) -> tuple[float, float] | None:
-    x, y = _number(a), _number(b)
-    return None if x is None or y is None else (x, y)
-
-
-def fmt(value: float) -> str:
-    return f"{value:g}"
-
-
-class _Lexer:
-    """Match the longest known phrase at each position; resolve ambiguity from context."""
-
-    def __init__(self, grammar: Grammar):
-        self.grammar = grammar
-        self.items: list[Item] = []
-        self.prev = "START"
-        self.last_word = ""
-        self.seen_dest = False
-
-    def run(self, tokens: list[tuple[str, str, object]]) -> list[Item]:
-        texts = [t[1] if t[0] in "WN" else "\0" for t in tokens]
-        i, n = 0, len(tokens)
-        while i < n:
-            kind, text, value = tokens[i]
-            if kind in "CSM":
-                self._emit_special(kind, text, value)
-                i += 1
-                continue
-            i += self._match(texts, i, n, tokens)
-        return self.items
-
-    def _emit_special(self, kind: str, text: str, value) -> None:
-        if kind == "C" and value is not None:
-            self._emit(Item("COORD", value, text))
-        elif kind == "C":
-            self._emit(Item("UNKNOWN", None, text))
-        else:
-            self._emit(Item("THEN" if kind == "S" else "COMMA", text, text))
-
-    def _match(self, texts, i, n, tokens) -> int:
-        for length in range(min(self.grammar.max_len, n - i), 0, -1):
-            meanings = self.grammar.table.get(tuple(texts[i : i + length]))
-            if meanings:
-                raw = tokens[i][2]
-                meaning = self._resolve(meanings, length == 1 and isinstance(raw, str) and raw.isupper())
-                if meaning is not None:
-                    phrase = " ".join(texts[i : i + length])
-                    self._emit(Item(meaning.kind, meaning.value, phrase, meaning.synonym))
-                    return length
-        kind, text, value = tokens[i]
-        if kind == "N":
-            self._emit(Item("NUMBER", value, text) if value is not None else Item("UNKNOWN", None, text))
-            return 1
-        meaning = self.grammar.correct(text)
-        if meaning is None:
-            self._emit_unknown(text)
-        else:
-            self._emit(Item(meaning.kind, meaning.value, text, meaning.synonym, corrected_from=text))
-        return 1
-
-    def _resolve(self, meanings: list[Meaning], letter: bool = False) -> Meaning | None:
-        """letter: the word is one capital letter right after an action ("patrol A and B"): a place's name."""
-        dest_ctx = (
-            self.prev in {"PREP", "CLASSWORD"}
-            or (self.prev in {"THEN", "AND", "COMMA"} and self.seen_dest)
-            or (letter and self.prev == "ACTION")
-        )
-        if len(meanings) == 1:
-            return meanings[0]
-        by_kind = {}
-        for m in meanings:
-            by_kind.setdefault(m.kind, m)
-        if "PLACE" in by_kind and len(by_kind["PLACE"].value.name) == 1 and not dest_ctx:
-            del by_kind["PLACE"]
-        if (self.prev in {"ALL", "ANY", "EXCEPT"} or self.last_word in {"a", "an"}) and "KIND" in by_kind:
-            return by_kind["KIND"]
-        order = _DEST_ORDER if dest_ctx else _ORDER
-        for kind in order:
-            if kind in by_kind:
-                return by_kind[kind]
-        return next(iter(by_kind.values()))
-
-    def _emit_unknown(self, text: str) -> None:
-        last = self.items[-1] if self.items else None
-        if last is not None and last.kind == "UNKNOWN" and self.prev == "UNKNOWN":
-            last.text = f"{last.text} {text}"
-            return
-        self._emit(Item("UNKNOWN", None, text))
-
-    def _emit(self, item: Item) -> None:
-        self.items.append(item)
-        if item.kind in {"PLACE", "COORD", "CONCEPT", "CLASSWORD"} or (
-            item.kind == "UNKNOWN" and self.prev == "PREP"
-        ):
-            self.seen_dest = True
-        self.last_word = item.text
-        if item.kind != "FILLER":
-            self.prev = item.kind
-
-
-_ORDER = (
-    "ROBOT", "ACTION", "PLACE", "KIND", "CONCEPT", "SPEED", "PREP", "ALL", "THEN", "AND",
-    "NUMBER", "TIMES", "UNIT", "DIRECTION", "EXCEPT", "ANY", "NOT", "FOREVER", "CLASSWORD", "FILLER",
-)  # fmt: skip
-_DEST_ORDER = ("PLACE", "CONCEPT", "CLASSWORD", "ROBOT", "ACTION", "KIND", "SPEED", *_ORDER[5:])
 
 
 class _Builder:
@@ -302,7 +62,7 @@ class _Builder:
         return self.cur
 
     def run(self, items: list[Item]) -> list[StepDraft]:
-        items = _merge_numbers(items)
+        items = merge_numbers(items)
         for index, item in enumerate(items):
             if item.corrected_from:
                 self.corrections[item.corrected_from] = item.synonym or _canonical_text(item)
@@ -434,6 +194,8 @@ class _Builder:
         step = self.cur
         if self.next_kind == "UNIT":
             self.pending = item.value
+        elif step.amount is None and self._names_instruction(step) and float(item.value).is_integer():
+            step.amount = item.value  # "cancel #12"
         elif self.prev == "UNKNOWN" and step.dest is not None and step.dest.kind == "unknown":
             step.dest.name = f"{step.dest.name} {item.text}"  # "Roon 3": one name, to ask about as one
         elif self.prev == "CLASSWORD" and step.dest is not None and step.dest.kind == "classword":
@@ -455,6 +217,10 @@ class _Builder:
                 place = meaning.value
                 return Dest("place", place.name, float(place.x), float(place.y), place.cls)
         return Dest("missing_place", name, cls=cls)
+
+    def _names_instruction(self, step: StepDraft) -> bool:
+        spec = ACTIONS.get(self._effective_action(step) or "")
+        return bool(spec and spec.names_instruction)
 
     def _unit_of(self, step: StepDraft) -> str | None:
         spec = ACTIONS.get(self._effective_action(step) or "")
@@ -491,34 +257,6 @@ class _Builder:
     on_and = on_comma = on_filler = on_times = on_prep
 
 
-def _merge_numbers(items: list[Item]) -> list[Item]:
-    """Number words said in parts become one number: "forty five" 45, "one hundred eighty" 180."""
-    out: list[Item] = []
-    for item in items:
-        last = out[-1] if out else None
-        if (
-            item.kind == "NUMBER"
-            and last is not None
-            and last.kind == "NUMBER"
-            and item.text.isalpha()
-            and last.text.replace(" ", "").isalpha()
-            and _joins(float(last.value), float(item.value))
-        ):
-            value = last.value * item.value if item.value == 100 else last.value + item.value
-            out[-1] = Item("NUMBER", value, f"{last.text} {item.text}")
-            continue
-        out.append(item)
-    return out
-
-
-def _joins(first: float, second: float) -> bool:
-    if second == 100:
-        return 1 <= first < 10
-    if first >= 100 and first % 100 == 0:
-        return 1 <= second < 100
-    return first >= 20 and first % 10 == 0 and 1 <= second < 10
-
-
 def _canonical_text(item: Item) -> str:
     value = item.value
     if isinstance(value, Place):
@@ -535,7 +273,7 @@ def interpret(text: str, grammar: Grammar) -> Interpretation:
         return check([], grammar, {}, {}, [], empty=True)
     if len(tokens) > MAX_WORDS:
         return check([], grammar, {}, {}, [], too_long=len(tokens))
-    items = _Lexer(grammar).run(tokens)
+    items = Lexer(grammar).run(tokens)
     builder = _Builder(grammar)
     drafts = builder.run(items)
     return check(
@@ -579,7 +317,21 @@ def check(
     kind = _type_of(problems, synonyms)
     question = " ".join(dict.fromkeys(p.question for p in problems[:3])) or None
     why = reason_of(kind, steps, synonyms, corrections, problems, not_done)
-    return Interpretation(kind, steps, dict(synonyms), why, question, dict(corrections), problems, not_done)
+    return _interpretation(kind, steps, synonyms, why, question, problems)
+
+
+def _interpretation(kind, steps, synonyms, why, question, problems) -> Interpretation:
+    """The typed result, each step read back in words and the answer box's example from the problems."""
+    return Interpretation(
+        kind,
+        tuple(steps),
+        why,
+        question,
+        next((p.example for p in problems if p.example), None),
+        dict(synonyms),
+        tuple(forms.read_back(step) for step in steps),
+        tuple(problems),
+    )
 
 
 def _describe_draft(draft: StepDraft) -> str:
@@ -595,7 +347,7 @@ def _refusal(grammar, too_long: int) -> Interpretation:
         why = "The instruction is empty."
         question = f"What should the robots do? For example 'move {example_robot(grammar)} to A'."
     problem = Problem("V", "empty" if not too_long else "too_long", "", question)
-    return Interpretation("V", [], {}, why, question, {}, [problem])
+    return _interpretation("V", [], {}, why, question, [problem])
 
 
 def _inherit(draft: StepDraft, previous: StepDraft | None) -> None:
@@ -636,6 +388,8 @@ def _step_dict(draft: StepDraft, grammar) -> dict:
     }
     if spec is not None and spec.unit in forms.MEASURED_UNITS and draft.amount is not None:
         step["amount"] = round(draft.amount, 3)
+    if spec is not None and spec.names_instruction and draft.amount is not None:
+        step["instruction"] = int(draft.amount)
     return step
 
 

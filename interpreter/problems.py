@@ -11,10 +11,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from fleetcore.actions import ACTIONS
-from interpreter.forms import MAX_STEPS
+from interpreter.forms import MAX_STEPS, read_back
 
 if TYPE_CHECKING:
-    from interpreter.parser import Dest, StepDraft
+    from interpreter.drafts import Dest, StepDraft
 
 EXAMPLE_COORDS = "(2, -1)"
 
@@ -204,7 +204,7 @@ def reason_of(kind: str, steps: list[dict], synonyms, corrections, problems, not
     if problems:
         parts.append(" ".join(dict.fromkeys(_PROBLEM_WORDS[p.code].format(w=p.word) for p in problems)))
     elif steps:
-        parts.append("Understood: " + "; then ".join(_describe(s) for s in steps) + ".")
+        parts.append("Understood: " + "; then ".join(read_back(s) for s in steps) + ".")
     if not_done and not problems:
         parts.append(("Nothing to do: " if not steps else "Not done, as you said: ") + "; ".join(
             f"not {what}" for what in not_done) + ".")  # fmt: skip
@@ -228,33 +228,6 @@ _PROBLEM_WORDS = {
     "empty": "The instruction is empty.",
     "too_long": "The instruction is too long.",
 }
-
-
-_AMOUNT_SHOWN = {"m": "{:g} m", "deg": "{:g}°", "s": "{:g} s"}
-
-
-def _describe(step: dict) -> str:
-    robots = step["robots"]
-    if isinstance(robots, dict):
-        robots = " ".join(
-            [next(k for k in ("all", "any") if robots.get(k))]
-            + ([robots["model"]] if robots.get("model") else [])
-            + ([f"except {', '.join(robots['except'])}"] if robots.get("except") else [])
-        )
-    elif not isinstance(robots, str):
-        robots = ", ".join(robots)
-    text = f"{step['action']} {robots}"
-    if step.get("amount") is not None:
-        text += " " + _AMOUNT_SHOWN[ACTIONS[step["action"]].unit].format(step["amount"])
-    if step.get("span"):
-        text += f" (the {step['span']} step(s) before, until stopped)"
-    if step["destination"]:
-        text += f" to {step['destination']['name']}"
-    if step["task"]:
-        text += f" and {step['task']}"
-    if step["speed"]:
-        text += f" ({step['speed']})"
-    return text
 
 
 def _place_names(grammar, limit: int = 12) -> str:

@@ -1,4 +1,4 @@
-"""The interpreter for the rest of the project: interpret(), teach(), warm_up(), export and import.
+"""The interpreter for the rest of the project: interpret(), read(), teach(), warm_up(), export and import.
 
 Each process keeps one Store: the parser's snapshot of the ontology (built through owlready2 once per
 ontology version) and the phrase table for the current fleet. Every call compares the version tokens in
@@ -13,11 +13,24 @@ import threading
 
 from django.db import transaction
 
+from audit import records as audit
+from fleetcore.interpretation import Interpretation
+from interpreter import models as m
 from interpreter import ontology, versions
 from interpreter.lessons import EXAMPLES, Answer, parse_answer
 from interpreter.lexicon import Fleet, Grammar, Lexicon, Place, RobotInfo, phrase_key
+from interpreter.models import (
+    ActionConcept,
+    DestinationClass,
+    DestinationConcept,
+    Lesson,
+    Synonym,
+    load_terms,
+)
 from interpreter.parser import interpret as parse
 from interpreter.terms import Terms
+from places.models import Location, Map
+from robots.models import Robot
 
 log = logging.getLogger(__name__)
 _PLACE_CLASSES = {"room": "Room", "waypoint": "Waypoint"}
@@ -28,7 +41,7 @@ class Store:
 
     def __init__(self):
         self.lock = threading.Lock()
-        self.local_changes: list[str] = []
+        self.local_changes = versions.LOCAL_CHANGES  # this process's own edits (the same list)
         self.reset()
 
     def reset(self) -> None:
@@ -39,7 +52,11 @@ class Store:
         self.builds = 0
 
     def get_grammar(self) -> Grammar:
-        onto_token, fleet_token = versions.current()
+        try:
+            onto_token, fleet_token = versions.current()
+        except Exception as exc:  # Redis away or refusing writes: the grammar this process has, or one afresh
+            log.warning("interpreter: version tokens not read (%r); the grammar as it is", exc)
+            onto_token, fleet_token = self.onto_token or "offline", self.fleet_token or "offline"
         with self.lock:
             changes = set(self.local_changes)
             self.local_changes.clear()
@@ -61,15 +78,12 @@ def store() -> Store:
 
 
 def _load_terms() -> Terms:
-    from interpreter.models import load_terms
 
     return load_terms()
 
 
 def load_fleet(version: str = "0") -> Fleet:
     """Read robot names, kinds and named locations from the database."""
-    from places.models import Location
-    from robots.models import Robot
 
     robots = [RobotInfo(*row) for row in Robot.objects.values_list("name", "model", "drive")]
     places, seen = [], set()
@@ -80,9 +94,23 @@ def load_fleet(version: str = "0") -> Fleet:
     return Fleet(robots, places, version)
 
 
-def interpret(text: str) -> dict:
-    """Interpret one instruction; return the JSON object of the interpreter's API."""
-    return parse(text, store().get_grammar()).as_dict()
+def interpret(text: str) -> Interpretation:
+    """Interpret one instruction with the grammar as it is now (its version tokens checked)."""
+    return parse(text, store().get_grammar())
+
+
+def read(text: str) -> Interpretation:
+    """The text parsed once, for `submit` and the page's socket: with the grammar this process already has (no
+    Redis on the way), so a stop is known at once whatever Redis does; anything else is kept when that grammar
+    is still the current one, and parsed again only when the ontology or the fleet changed meanwhile."""
+    had = store().grammar
+    if had is None:
+        return interpret(text)
+    quick = parse(text, had)
+    if quick.is_stop:
+        return quick
+    current = store().get_grammar()
+    return quick if current is had else parse(text, current)
 
 
 def warm_up() -> None:
@@ -117,13 +145,12 @@ def teach(answer_text: str, user=None, instruction=None) -> dict:
         "ontology_version": versions.ontology_number(),
     }
     if lesson.instruction is not None:
-        result["instruction"] = interpret(lesson.instruction.text)
+        result["instruction"] = interpret(lesson.instruction.text).to_dict()
     return result
 
 
 def _asked(instruction):
     """What the question of this instruction asked about (the parser's first problem with a word), or None."""
-    from interpreter.models import Lesson
 
     pk = getattr(instruction, "pk", instruction)
     if pk is None:
@@ -132,7 +159,7 @@ def _asked(instruction):
     text = instructions.objects.filter(pk=pk).values_list("text", flat=True).first()
     if text is None:
         return None
-    return next((p for p in parse(text, store().get_grammar()).problems if p.word), None)
+    return next((p for p in interpret(text).problems if p.word), None)
 
 
 def _bare_answer(text: str, asked) -> Answer | None:
@@ -180,7 +207,6 @@ def _known(grammar: Grammar, word: str) -> list:
 
 
 def _teach_synonym(answer: Answer, grammar: Grammar) -> str:
-    from interpreter.models import ActionConcept, DestinationConcept, Synonym
 
     targets = {m.kind: m for m in _known(grammar, answer.meaning)}
     already = {m.kind: m for m in _known(grammar, answer.word)}
@@ -217,7 +243,6 @@ def _refuse_if_known(word: str, already: dict, same: tuple | None) -> None:
 
 
 def _teach_not_a_place(answer: Answer, grammar: Grammar) -> str:
-    from interpreter.models import DestinationClass, DestinationConcept
 
     _refuse_if_known(answer.word, {m.kind: m for m in _known(grammar, answer.word)}, None)
     cls = (
@@ -239,7 +264,6 @@ def _teach_location(answer: Answer, grammar: Grammar) -> str:
 
 
 def _create_location(name: str, x: float, y: float, like: str | None = None) -> None:
-    from places.models import Location, Map
 
     model = Location.objects.filter(name=like).first() if like else None
     the_map = model.map if model else Map.objects.order_by("-created_at").first()
@@ -249,7 +273,6 @@ def _create_location(name: str, x: float, y: float, like: str | None = None) -> 
 
 
 def _teach_forget(answer: Answer, grammar: Grammar) -> str:
-    from interpreter.models import DestinationConcept, Synonym
 
     deleted, _ = Synonym.objects.filter(word=answer.word).delete()
     if not deleted:
@@ -268,8 +291,6 @@ _TEACHERS = {
 
 
 def _record_lesson(text: str, answer: Answer, meaning: str, user, instruction):
-    from audit import records as audit
-    from interpreter.models import Lesson
 
     who = user if getattr(user, "is_authenticated", False) else None
     lesson = Lesson.objects.create(
@@ -298,7 +319,6 @@ def export_ontology() -> bytes:
 @transaction.atomic
 def import_ontology(data: bytes | str) -> Terms:
     """Replace the editable terms with those of an OWL RDF/XML ontology; return them."""
-    from interpreter import models as m
 
     terms = ontology.import_rdfxml(data)
     if not terms.actions:

@@ -12,9 +12,13 @@ from django.db import transaction
 from django.db.models import F
 from django.utils import timezone
 
+from interpreter.models import OntologyVersion
+
 ONTOLOGY_KEY = "interpreter:ontology-token"
 FLEET_KEY = "interpreter:fleet-token"
 TIMEOUT = None  # never expire
+# Changes made in this process, seen by its own store (interpreter.service.Store) before they reach the cache.
+LOCAL_CHANGES: list[str] = []
 
 
 def _token() -> str:
@@ -23,15 +27,13 @@ def _token() -> str:
 
 def bump_ontology() -> str:
     """Record an edit: a new number and token in the DB now, in the cache after commit."""
-    from interpreter.models import OntologyVersion
-
     token = _token()
     updated = OntologyVersion.objects.filter(pk=1).update(
         number=F("number") + 1, token=token, changed_at=timezone.now()
     )
     if not updated:
         OntologyVersion.objects.update_or_create(pk=1, defaults={"number": 1, "token": token})
-    _local_changes().append("ontology")
+    LOCAL_CHANGES.append("ontology")
     transaction.on_commit(lambda: cache.set(ONTOLOGY_KEY, token, TIMEOUT))
     return token
 
@@ -39,7 +41,7 @@ def bump_ontology() -> str:
 def bump_fleet() -> str:
     """Record a change of robots or locations."""
     token = _token()
-    _local_changes().append("fleet")
+    LOCAL_CHANGES.append("fleet")
     transaction.on_commit(lambda: cache.set(FLEET_KEY, token, TIMEOUT))
     return token
 
@@ -59,21 +61,10 @@ def current() -> tuple[str, str]:
 
 
 def ontology_number() -> int:
-    from interpreter.models import OntologyVersion
-
     row = OntologyVersion.objects.filter(pk=1).first()
     return row.number if row else 0
 
 
 def _ontology_token_from_db() -> str:
-    from interpreter.models import OntologyVersion
-
     row = OntologyVersion.objects.filter(pk=1).first()
     return row.token if row and row.token else "db-empty"
-
-
-def _local_changes() -> list:
-    """Changes made in this process, seen by its own store before they reach the cache."""
-    from interpreter.service import store
-
-    return store().local_changes

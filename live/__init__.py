@@ -4,6 +4,9 @@ Groups: "fleet" (every dashboard), "robot.<pk>" (a robot's page) and "alerts" (e
 and forward; the handler name in the consumer matches the payload's "type".
 """
 
+import asyncio
+import logging
+import time
 from typing import NotRequired, TypedDict
 
 from asgiref.sync import async_to_sync
@@ -12,6 +15,7 @@ from django.db import transaction
 
 FLEET_GROUP = "fleet"
 ALERTS_GROUP = "alerts"
+log = logging.getLogger(__name__)
 
 
 def robot_group(robot_id: int) -> str:
@@ -25,6 +29,7 @@ class RobotStatus(TypedDict, total=False):
     link_status: str
     state: str
     last_seen: str | None
+    stop_hold: str | None  # "held by a stop (admin, 10:43:44)" (Robot.hold_words), None when nothing holds it
 
 
 class StateChange(TypedDict):
@@ -44,6 +49,30 @@ class InstructionUpdate(TypedDict, total=False):
     text: str
     status: str
     outcome: str
+    expired: bool  # a question nobody answered in time: the console drops it from Progress
+
+
+class QueueEntry(TypedDict):
+    instruction: int
+    text: str
+    user: str | None
+    status: str  # running, queued, preempted
+    position: int  # 0 for the running one, 1.. for the waiting ones in the order they will run
+    step: int | None  # the step it is at ("step 2 of 3")
+    steps: int
+    doing: str  # that step in words (interpreter.forms.read_back)
+    goal: dict | None  # a move's goal {name, x, y}: the page ages distance_left and eta_s with each pose
+    distance_left: float | None  # m, straight line from the last pose to a move's goal
+    speed: float | None  # m/s, the step's speed word on the robot's limit
+    eta_s: float | None  # distance_left / speed
+
+
+class RobotQueue(TypedDict):
+    type: str  # "robot.queue"
+    robot: str
+    id: int
+    running: QueueEntry | None
+    queued: list[QueueEntry]
 
 
 class AlertUpdate(TypedDict):
@@ -52,11 +81,30 @@ class AlertUpdate(TypedDict):
     open_count: int  # alerts open now, for every page's badge
 
 
+SEND_TIMEOUT_S = 0.5  # a push waits this long at most for Redis (the channel layer)
+QUIET_S = 2.0  # after a push failed, the next ones are skipped this long: a frozen Redis costs one wait
+_quiet_until = 0.0
+
+
 def send(group: str, payload: dict) -> None:
-    """Send now (from sync code outside a transaction, or from a worker loop)."""
+    """Send now (from sync code outside a transaction, or from a worker loop); never raises.
+
+    A push is best effort: Redis frozen, away or refusing writes is logged and the push lost (pages catch up
+    from their next snapshot), so what pushed it (a stop's answer above all) goes on within SEND_TIMEOUT_S.
+    """
+    global _quiet_until
     layer = get_channel_layer()
-    if layer is not None:
-        async_to_sync(layer.group_send)(group, payload)
+    if layer is None or time.monotonic() < _quiet_until:
+        return
+    try:
+        async_to_sync(_send_bounded)(layer, group, payload)
+    except Exception as exc:
+        _quiet_until = time.monotonic() + QUIET_S
+        log.warning("push to %s lost (Redis: %r); pushes paused %g s", group, exc, QUIET_S)
+
+
+async def _send_bounded(layer, group: str, payload: dict) -> None:
+    await asyncio.wait_for(layer.group_send(group, payload), SEND_TIMEOUT_S)
 
 
 def send_on_commit(group: str, payload: dict) -> None:
@@ -73,6 +121,7 @@ def robot_status(robot) -> None:
         link_status=robot.link_status,
         state=robot.state,
         last_seen=robot.last_seen.isoformat() if robot.last_seen else None,
+        stop_hold=getattr(robot, "hold_words", None),
     )
     send_on_commit(FLEET_GROUP, payload)
     send_on_commit(robot_group(robot.pk), payload)
@@ -104,8 +153,16 @@ def instruction(instruction) -> None:
             text=instruction.text,
             status=instruction.status,
             outcome=instruction.outcome,
+            expired=bool(getattr(instruction, "expired", False)),
         ),
     )
+
+
+def queue(payload: dict) -> None:
+    """A robot's task list changed (execution.queues.robot_queue): what it runs and what waits behind it."""
+    message = RobotQueue(type="robot.queue", **payload)
+    send_on_commit(FLEET_GROUP, message)
+    send_on_commit(robot_group(payload["id"]), message)
 
 
 def alert(alert: dict, open_count: int) -> None:
@@ -125,9 +182,11 @@ class RobotPose(TypedDict):
     yaw: float
     v: float  # linear speed, m/s
     w: float  # angular speed, rad/s
-    t: float  # unix time of the odometry message
+    t: float  # unix time the pose was taken (its age says how stale it is)
     battery: NotRequired[float]  # percent, from the robot's bound sensor_msgs/BatteryState, when it has one
     rtt: NotRequired[float]  # ms, the round trip of a ping on the link to the robot's endpoint
+    fault: NotRequired[str]  # why its odometry is refused now ("x is NaN"): x, y, yaw are the last good ones
+    fault_since: NotRequired[float]  # unix time the odometry began to be refused
 
 
 class PoseBatch(TypedDict):
@@ -196,6 +255,63 @@ def camera(robot_id: int, topic: str, message: dict) -> RobotCamera:
         format=str(message.get("format", "")),
         data=message.get("data", ""),
     )
+
+
+class RobotDiagnostics(TypedDict):
+    type: str  # "robot.diagnostics"
+    id: int
+    topic: str
+    statuses: list[
+        dict
+    ]  # name, level (0 OK, 1 WARN, 2 ERROR, 3 STALE), level_name, message, hardware_id, values
+
+
+DIAGNOSTIC_LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
+TEXT_MAX = 200  # a robot's words (a status's name, message, a value) are cut to this many characters
+
+
+def _text(value) -> str:
+    return str(value if value is not None else "")[:TEXT_MAX]
+
+
+def _level(value) -> int:
+    """A DiagnosticStatus level as a number (rosbridge sends a ROS 2 byte as a one-character string or bytes)."""
+    if isinstance(value, str) and len(value) == 1:
+        value = ord(value)
+    return value if isinstance(value, int) and value in DIAGNOSTIC_LEVELS else 3
+
+
+def diagnostics(robot_id: int, topic: str, statuses: list) -> RobotDiagnostics:
+    """A robot's statuses from one diagnostic_msgs/DiagnosticArray (portal.feeds keeps the robot's own); a level
+    outside OK/WARN/ERROR/STALE is said STALE; text cut to TEXT_MAX (the page shows it as text, never markup)."""
+    out = []
+    for status in statuses[:100]:
+        if not isinstance(status, dict):
+            continue
+        level = _level(status.get("level"))
+        values = status.get("values") if isinstance(status.get("values"), list) else []
+        out.append({
+            "name": _text(status.get("name")), "level": level, "level_name": DIAGNOSTIC_LEVELS[level],
+            "message": _text(status.get("message")), "hardware_id": _text(status.get("hardware_id")),
+            "values": [[_text(v.get("key")), _text(v.get("value"))] for v in values[:20] if isinstance(v, dict)],
+        })  # fmt: skip
+    return RobotDiagnostics(type="robot.diagnostics", id=robot_id, topic=topic, statuses=out)
+
+
+class RobotTopic(TypedDict):
+    type: str  # "robot.topic"
+    id: int
+    topic: str
+    msg_type: str
+    rate_hz: float | None  # messages a second seen over the last few seconds (None: fewer than two yet)
+    capped: bool  # the rate is at the inspector's cap: the topic may publish faster
+    count: int  # messages seen since the inspector started
+    text: str  # the latest message as indented JSON, long arrays and strings shortened
+
+
+def topic_message(robot_id: int, topic: str, msg_type: str, rate: dict, text: str) -> RobotTopic:
+    """The topic inspector's latest message of a robot's topic (portal.inspector)."""
+    return RobotTopic(type="robot.topic", id=robot_id, topic=topic, msg_type=msg_type, text=text, **rate)
 
 
 class RegistrationProgress(TypedDict, total=False):

@@ -2,6 +2,7 @@
 
 from django.db import transaction
 
+from fleetcore.world import load_world
 from places.models import Location, Map
 from places.signals import world_loaded
 
@@ -9,8 +10,6 @@ from places.signals import world_loaded
 @transaction.atomic
 def load_world_into_db(name: str) -> str:
     """Create or update the world's map and locations; schedules for the robots already registered."""
-    from fleetcore.world import load_world
-
     world = load_world(name)
     fresh = Map.from_grid(world.name, world.map, source=f"fleetcore/worlds/{world.name}")
     map_row, _ = Map.objects.update_or_create(

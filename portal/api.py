@@ -11,8 +11,14 @@ from django.http import JsonResponse
 from ninja import NinjaAPI
 from ninja.errors import HttpError
 from ninja.openapi.docs import Swagger
+from ninja.renderers import JSONRenderer
 
 from access.roles import api_auth, may, refusal
+from portal.api_alerts import router as alerts_router
+from portal.api_interpreter import router as interpreter_router
+from portal.api_robots import router as robots_router
+from portal.api_routes import router as fleet_router
+from portal.api_tasklist import router as tasklist_router
 
 UNPARSEABLE = "Cannot parse request body"
 
@@ -32,7 +38,14 @@ def view_required(view):
     return wrapper
 
 
+class StrictJSONRenderer(JSONRenderer):
+    """Strict JSON: a NaN or an infinity in an answer is an error here, never a bare NaN a client cannot parse."""
+
+    json_dumps_params = {"allow_nan": False}
+
+
 api = NinjaAPI(
+    renderer=StrictJSONRenderer(),
     title="Fleet portal API",
     version="1",
     auth=api_auth("view"),
@@ -55,12 +68,8 @@ def http_error(request, exc: HttpError):
 
 
 def _mount_routers():
-    from portal.api_alerts import router as alerts_router
-    from portal.api_interpreter import router as interpreter_router
-    from portal.api_robots import router as robots_router
-    from portal.api_routes import router as fleet_router
-
     api.add_router("/", fleet_router)
+    api.add_router("/", tasklist_router)
     api.add_router("/robots", robots_router)
     api.add_router("/interpreter", interpreter_router)
     api.add_router("/alerts", alerts_router)

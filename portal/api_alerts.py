@@ -28,6 +28,7 @@ class AlertOut(Schema):
     robot: str | None
     robot_id: int | None
     message: str
+    event: str  # "execution 42", "stop at …"; "" for a condition while it lasts
     count: int
     raised_at: datetime
     last_raised_at: datetime

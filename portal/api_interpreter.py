@@ -16,6 +16,7 @@ from pydantic import Field
 from access.roles import api_auth, may, refusal
 from interpreter import service
 from interpreter.lessons import parse_answer
+from interpreter.models import Lesson
 from portal.api_types import Id, Text
 
 router = Router(tags=["interpreter"])
@@ -33,7 +34,7 @@ class TeachIn(Schema):
 @router.post("/interpret")
 def interpret(request, body: InterpretIn):
     """Interpret an instruction without running it."""
-    return service.interpret(body.text)
+    return service.interpret(body.text).to_dict()
 
 
 @router.post("/teach", auth=api_auth("teach"))
@@ -45,8 +46,6 @@ def teach(request, body: TeachIn):
 
 def _refuse_forgetting_seeded(user, answer: str) -> None:
     """An operator's "forget X" undoes a lesson; forgetting a word nobody taught needs edit_vocabulary."""
-    from interpreter.models import Lesson
-
     try:
         parsed = parse_answer(answer)
     except ValueError:

@@ -1,6 +1,7 @@
 """Locations, schedules and instructions in the JSON API."""
 
 import math
+from dataclasses import replace
 from datetime import time
 
 from ninja import Query, Router, Schema
@@ -10,7 +11,10 @@ from pydantic import Field, model_validator
 
 from access.roles import api_auth
 from audit import records as audit
+from execution.instructions import submit
 from execution.models import Instruction, TimeSlot
+from fleetcore.interpretation import Interpretation
+from interpreter import forms
 from places.models import Location
 from portal.api_types import Id, LocalTime, Name, NonBlank, Text, get_or_404, path_id
 from portal.schemas import InstructionOut
@@ -162,8 +166,6 @@ def instruction_detail(request, instruction_id: int = path_id()):
 )
 def create_instruction(request, payload: InstructionIn):
     """Give an instruction in words, or send robots (by id) to a place: click-to-move, no words involved."""
-    from execution.instructions import submit
-
     if payload.text is None:
         text, parse = _move_by_ids(payload.robot_ids, payload.destination)
         return Status(201, submit(text, request.user, source="api", parse=parse))
@@ -178,7 +180,7 @@ def create_instruction(request, payload: InstructionIn):
     )
 
 
-def _move_by_ids(robot_ids: list[int], destination: Destination) -> tuple[str, dict]:
+def _move_by_ids(robot_ids: list[int], destination: Destination) -> tuple[str, Interpretation]:
     """The parse of "move these robots there", built from ids: a robot's name is never read as words."""
     robots = list(Robot.objects.filter(pk__in=robot_ids))
     missing = sorted(set(robot_ids) - {robot.pk for robot in robots})
@@ -194,8 +196,8 @@ def _move_by_ids(robot_ids: list[int], destination: Destination) -> tuple[str, d
     if destination.yaw is not None:
         goal["yaw"] = destination.yaw
         where += f" facing {math.degrees(destination.yaw):.0f}°"
-    names = [robot.name for robot in robots]
-    step = {"action": "move", "robots": names, "destination": goal, "task": None, "speed": None}
     text = f"move robots {', '.join(map(str, robot_ids))} to {where}"
-    parse = {"type": "I", "valid": True, "needs_user": False, "question": None, "steps": [step]}
-    return text, {**parse, "synonyms_used": {}, "reason": "click-to-move: robots given by id"}
+    understood = Interpretation.for_robots(
+        [robot.name for robot in robots], "move", "click-to-move: robots given by id", goal
+    )
+    return text, replace(understood, read_back=tuple(map(forms.read_back, understood.steps)))

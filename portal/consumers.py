@@ -7,6 +7,7 @@ names each command's ability) and the robot's lease exactly as the pages' POST v
 unknown, refused or dropped message is answered with a ``command.result`` saying why, never a traceback.
 """
 
+import json
 import logging
 import math
 from dataclasses import dataclass
@@ -17,16 +18,24 @@ from channels.generic.websocket import AsyncJsonWebsocketConsumer
 from django.db import DatabaseError
 
 import live
+from access.leases import ControlRefused
 from access.roles import may, refusal
+from audit import records as audit
 from execution import fast_stop
 from execution.held_teleop import HeldTeleop
+from execution.instructions import Reading, submit, understand
+from execution.link import LinkError
+from execution.models import Instruction
 from interpreter.service import warm_up
-from portal import feeds, snapshots, socket_input
+from portal import feeds, inspector, snapshots, socket_input
 from portal.fanout import PoseFanout
 from portal.schemas import InstructionOut
 from portal.socket_input import BadFrame
+from robots.models import Robot
+from robots.rosbridge.errors import RosbridgeError
 
 log = logging.getLogger(__name__)
+UNDERSTOOD = "_understood"  # the socket's Reading of an instruct message's text, handed on to submit
 
 
 class CommandError(Exception):
@@ -55,10 +64,6 @@ def _in_words(exc: Exception) -> str:
         exc, CommandError | ValueError | LookupError | PermissionError | ConnectionError | TimeoutError
     ):
         return str(exc) or exc.__class__.__name__
-    from access.leases import ControlRefused
-    from execution.link import LinkError
-    from robots.rosbridge.errors import RosbridgeError
-
     if isinstance(exc, ControlRefused | LinkError | RosbridgeError):
         return str(exc) or exc.__class__.__name__
     return f"could not be done: an internal error ({exc.__class__.__name__}), logged for the admins"
@@ -75,8 +80,6 @@ def _call(action, *args):
 
 def command_stop(user, content: dict) -> str:
     """Stop the robots named (or all), held by someone else or not: a stop always gets through."""
-    from robots.models import Robot
-
     try:
         ids = socket_input.robot_ids(content.get("robots", "all"))
     except BadFrame as exc:
@@ -85,7 +88,8 @@ def command_stop(user, content: dict) -> str:
     results = _call(_control().stop, robots, user) if robots else {}
     unreached = [f"{name}: {result}" for name, result in (results or {}).items() if result != "stopped"]
     stopped = ", ".join(robot.name for robot in robots) or "no robot"
-    return f"Stopped {stopped}." + "".join(f" {reason}" for reason in unreached)
+    note = results.note() if hasattr(results, "note") else ""  # what of the bookkeeping failed, said
+    return f"Stopped {stopped}." + "".join(f" {reason}" for reason in unreached) + note
 
 
 def teleop_checks(user, content: dict):
@@ -133,9 +137,6 @@ def checked_teleops(user, robot_ids) -> dict:
 
 def command_instruct(user, content: dict) -> tuple[str, dict]:
     """An instruction typed in the console, sent over the page's socket: the answer carries the instruction."""
-    from execution.instructions import submit
-    from execution.models import Instruction
-
     text, answer_to = content.get("text"), content.get("answer_to")
     if not isinstance(text, str) or not text.strip() or len(text) > 2000 or "\x00" in text:
         raise CommandError("text: an instruction of 1 to 2000 characters")
@@ -153,7 +154,9 @@ def command_instruct(user, content: dict) -> tuple[str, dict]:
         raise CommandError(f"robot_ids: {exc}") from None
     if selected == "all":
         raise CommandError("robot_ids: a list of robot ids")
-    instruction = _call(submit, text, user, "console", None, question, selected)
+    reading = content.get(UNDERSTOOD)  # the socket's reading of this text (never from a browser's frame)
+    reading = reading if isinstance(reading, Reading) else None
+    instruction = _call(submit, text, user, "console", reading, question, selected)
     return f"#{instruction.pk} {instruction.status}", {"instruction": InstructionOut.of(instruction)}
 
 
@@ -173,8 +176,6 @@ COMMANDS = {
 
 
 def refused(user, name, exc: CommandError) -> None:
-    from audit import records as audit
-
     audit.record(user, "command.refused", str(name)[:40], reason=str(exc))
 
 
@@ -221,7 +222,15 @@ async def _accept_user(consumer) -> object | None:
     return user
 
 
-class _PageConsumer(AsyncJsonWebsocketConsumer):
+class _StrictJson(AsyncJsonWebsocketConsumer):
+    """Sends strict JSON only: a bare NaN or Infinity would make JSON.parse throw in every browser reading it."""
+
+    @classmethod
+    async def encode_json(cls, content):
+        return json.dumps(content, allow_nan=False)
+
+
+class _PageConsumer(_StrictJson):
     """Authenticate, join the page's groups, send the snapshot first, then forward every delta."""
 
     async def connect(self):
@@ -274,10 +283,13 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
             self.teleop.close()
         if getattr(self, "feeds", None) is not None:
             await self.feeds.close()
-        if getattr(self, "poses", None) is not None:
-            await self.poses.unsubscribe(self)
-        for group in getattr(self, "joined", ()):
-            await self.channel_layer.group_discard(group, self.channel_name)
+        try:
+            if getattr(self, "poses", None) is not None:
+                await self.poses.unsubscribe(self)
+            for group in getattr(self, "joined", ()):
+                await self.channel_layer.group_discard(group, self.channel_name)
+        except Exception as exc:  # Redis frozen or refusing writes: the groups' entries expire on their own
+            log.warning("socket closed without leaving its groups: %r", exc)
 
     async def receive(self, text_data=None, bytes_data=None, **kwargs):
         """Every frame: decoded and rate-limited (portal.socket_input), then one command; bad ones answered."""
@@ -318,20 +330,27 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
                 return
             await fast_stop.stop_now(ids)  # a head start; run_command below checks, stops again, answers
         if content.get("command") == "instruct" and self.abilities["instruct"]:
-            await self.typed_stop_head_start(content.get("text"))
+            content = await self.typed_stop_head_start(content)
         # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
         reply = await database_sync_to_async(run_command, thread_sensitive=False)(user, content)
         await self.send_json(reply)
 
-    async def typed_stop_head_start(self, text) -> None:
-        """A typed "stop ...": flags and zeros from this loop, as the STOP button's, before submit writes anything."""
-        from execution.instructions import stop_names
-
-        if not isinstance(text, str) or len(text) > 2000:
-            return  # command_instruct refuses it in words
-        names = await database_sync_to_async(stop_names, thread_sensitive=False)(text)
-        if names is not None:
-            await fast_stop.stop_now(fast_stop.TARGETS.ids(names))
+    async def typed_stop_head_start(self, content: dict) -> dict:
+        """The typed text read once: a "stop ..." gets flags and zeros from this loop, as the STOP button's, before
+        submit writes anything; the message goes on with what was understood (submit does not read it again)."""
+        text = content.get("text")
+        if not isinstance(text, str) or not text.strip() or len(text) > 2000:
+            return content  # command_instruct refuses it in words
+        try:
+            reading = await database_sync_to_async(understand, thread_sensitive=False)(text)
+        except (
+            Exception
+        ):  # the database or the ontology: submit reads it again and says what failed, in words
+            log.exception("reading %r for a stop's head start failed", text[:80])
+            return content
+        if reading.stops is not None:
+            await fast_stop.stop_now(fast_stop.TARGETS.ids(reading.stops))
+        return {**content, UNDERSTOOD: reading}
 
     async def watch(self, content) -> None:
         """Follow one robot's scan on this page's map ({"command": "watch", "robot": id or null})."""
@@ -367,7 +386,7 @@ class _PageConsumer(AsyncJsonWebsocketConsumer):
         await self.send_json(event)
 
     # One handler per payload type of live; the name matches the message "type".
-    robot_status = instruction_update = robot_goal = robot_path = forward
+    robot_status = instruction_update = robot_goal = robot_path = robot_queue = forward
     robot_transition = lease_update = changed
 
     async def registration_progress(self, event):
@@ -396,19 +415,37 @@ class RobotConsumer(_PageConsumer):
         return self.robot_id
 
     def snapshot(self):
-        from robots.models import Robot
-
         self.robot_id = self.scope["url_route"]["kwargs"]["robot_id"]
         if not 1 <= self.robot_id <= socket_input.MAX_ID:
             return None
         robot = Robot.objects.filter(pk=self.robot_id).first()
         return snapshots.robot_snapshot(robot) if robot else None
 
+    async def receive_json(self, content, **kwargs):
+        """The topic inspector ({"command": "inspect", "topic": "/odom"}; no topic: off) for whoever may look at
+        the robot; every other command as on any page."""
+        if content.get("command") != "inspect":
+            await super().receive_json(content, **kwargs)
+            return
+        if getattr(self, "inspector", None) is None:
+            self.inspector = inspector.Inspector(self.robot_id, self.send_json)
+        try:
+            detail = await self.inspector.inspect(content.get("topic"))
+        except inspector.NotInspectable as exc:
+            await self.send_json(result(content, False, str(exc)))
+            return
+        await self.send_json(result(content, True, detail))
+
+    async def disconnect(self, code):
+        if getattr(self, "inspector", None) is not None:
+            await self.inspector.close()
+        await super().disconnect(code)
+
     async def connect(self):
         await super().connect()
         if getattr(
             self, "joined", None
-        ):  # accepted: its robot's scan and camera follow while the page is open
+        ):  # accepted: its robot's scan, camera and diagnostics follow while the page is open
             self.feeds = feeds.Feeds(self.send_json)
             try:
                 await self.feeds.watch(self.robot_id)
@@ -416,7 +453,7 @@ class RobotConsumer(_PageConsumer):
                 log.exception("robot %s: sensor feeds not started", self.robot_id)
 
 
-class AlertsConsumer(AsyncJsonWebsocketConsumer):
+class AlertsConsumer(_StrictJson):
     """/ws/alerts/ on every page: the open alerts first, then each raise, acknowledgement and resolution."""
 
     async def connect(self):

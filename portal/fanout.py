@@ -3,7 +3,7 @@
 The links process publishes one batch of poses per tick to the channel layer's poses group (robots.poses). If
 every dashboard socket were a member of that group, each tick would be copied into Redis once per socket, read
 back and decoded by each, and encoded again as JSON by each: work that grows as dashboards × robots, which at
-hundreds of robots and tens of dashboards is what fell behind first (README, "Measured on the cluster").
+hundreds of robots and tens of dashboards is what fell behind first (docs/scale.md, "Measured on the cluster").
 
 Instead each web process (each event loop) has one PoseFanout, the only member of the group for that process.
 It reads a tick, encodes it once, and hands the same text to every fleet socket of the process; a robot page gets
@@ -30,8 +30,23 @@ _fanouts: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop 
 
 
 def encode(poses: list) -> str:
-    """The text of one fleet.poses message, as a consumer's send_json would encode it."""
-    return json.dumps(live.poses(poses))
+    """The text of one fleet.poses message, as a consumer's send_json would encode it: strict JSON, never a bare
+    NaN or Infinity (JSON.parse in the browser would throw on it). A pose that cannot be said so is left out
+    (the gate in robots.poses should have refused it already), never the whole tick."""
+    try:
+        return json.dumps(live.poses(poses), allow_nan=False)
+    except ValueError:
+        kept = [pose for pose in poses if _strict(pose)]
+        log.error("pose fanout: %d poses with NaN or infinity left out", len(poses) - len(kept))
+        return json.dumps(live.poses(kept), allow_nan=False)
+
+
+def _strict(pose) -> bool:
+    try:
+        json.dumps(pose, allow_nan=False)
+    except ValueError:
+        return False
+    return True
 
 
 class _Socket:

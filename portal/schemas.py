@@ -6,9 +6,13 @@ from ninja import Field, Schema
 
 
 class InstructionOut(Schema):
-    id: int
+    id: int | None = Field(None, description="None for a stop the database could not record (it was done)")
     text: str
     user: str | None = Field(None, alias="user.username")
+    source: str = Field("console", description="console, api, cli; the system's: schedule, traffic")
+    cause: str = Field(
+        "", description="why the system sent it (no user): make way for husky, instruction #14 by admin"
+    )
     type: str
     status: str
     parse: dict

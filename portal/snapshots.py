@@ -1,10 +1,16 @@
 """What a new subscriber sees first (the snapshot), and the rows the pages render: the same data, one place."""
 
+import time
+
 from django.core.cache import cache
+from django.db.models import prefetch_related_objects
 from django.utils import timezone
 
 import live
 from access.models import ControlLease
+from alerts import service
+from alerts.models import Alert
+from execution import queues, traffic_state
 from execution.models import Execution, Instruction
 from robots.models import Robot
 
@@ -25,6 +31,7 @@ def _robot_row(robot, holders: dict, current: dict, goals: dict, cached: dict) -
         "start_pose": robot.start_pose,
         "holder": holders.get(robot.pk, (None, None))[0],
         "held_until": holders.get(robot.pk, (None, None))[1],
+        "stop_hold": robot.hold_words,  # "held by a stop (admin, 10:43:44)": nothing automatic moves it
         "instruction": current.get(robot.pk),
         "goal": goals.get(robot.pk),
         "pose": cached.get(live.POSE_CACHE_KEY.format(id=robot.pk)),
@@ -34,6 +41,7 @@ def _robot_row(robot, holders: dict, current: dict, goals: dict, cached: dict) -
 def robot_rows(robots) -> list[dict]:
     """The robots with their holders, current instructions, goals and last poses, in few queries."""
     robots = list(robots)
+    prefetch_related_objects(robots, "held_by")  # the stops' holders, in one query
     ids = [robot.pk for robot in robots]
     leases = ControlLease.objects.filter(robot_id__in=ids, expires_at__gt=timezone.now()).values_list(
         "robot_id", "user__username", "expires_at"
@@ -51,10 +59,8 @@ def robot_rows(robots) -> list[dict]:
 
 def _add_routes(rows: list[dict], names: dict) -> None:
     """Each robot's reserved route (what is left of it) and whom it waits for, as the map draws them."""
-    from execution import traffic
-
     try:
-        found = traffic.routes(names)
+        found = traffic_state.routes(names)
     except Exception:  # Redis away: the next live.path says it
         return
     blockers = {entry["waiting_for"] for entry in found.values()} - set(names) - {None}
@@ -90,8 +96,10 @@ def fleet_snapshot() -> dict:
     recent = Instruction.objects.select_related("user")[:20]
     return {
         "type": "snapshot",
+        "server_time": time.time(),  # the clock the poses' "t" is on: the browser ages poses by it
         "robots": robot_rows(Robot.objects.all()),
         "instructions": [_instruction_row(instruction) for instruction in recent],
+        "queues": queues.all_queues(),  # the task list: what each busy robot runs and what waits
     }
 
 
@@ -100,7 +108,9 @@ def robot_snapshot(robot) -> dict:
     transitions = robot.transitions.all()[:20]
     return {
         "type": "snapshot",
+        "server_time": time.time(),
         "robots": robot_rows([robot]),
+        "queue": queues.robot_queue(robot),
         "transitions": [
             {
                 "from_state": record.from_state,
@@ -116,9 +126,6 @@ def robot_snapshot(robot) -> dict:
 
 def alerts_snapshot(limit: int = 20) -> dict:
     """What every page's alert badge starts from: the open count and the newest open alerts."""
-    from alerts import service
-    from alerts.models import Alert
-
     rows = Alert.objects.open().select_related("robot", "acknowledged_by", "resolved_by")[:limit]
     return {
         "type": "alerts.snapshot",

@@ -9,6 +9,7 @@ urlpatterns = [
     path("robots/", views.robot_list, name="robot-list"),
     path("robots/<int:pk>/", views.robot_detail, name="robot-detail"),
     path("robots/<int:pk>/lease/", views.lease, name="robot-lease"),
+    path("robots/<int:pk>/release/", views.release_hold, name="robot-release-hold"),
     path("robots/<int:pk>/teleop/", views.teleop, name="robot-teleop"),
     path("register/", views.registration, name="registration"),
     path("register/bindings/<int:pk>/", views.choose_binding, name="choose-binding"),

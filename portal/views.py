@@ -12,16 +12,20 @@ from django.core.paginator import Paginator
 from django.http import Http404, JsonResponse
 from django.shortcuts import get_object_or_404, redirect, render
 
+from access import holds, leases
 from access.roles import may, requires
 from alerts.models import Alert
 from audit.models import AuditEntry
 from execution import fast_stop
 from execution.models import Instruction, TimeSlot
+from fleetcore.world import WorldFormatError, load_world
 from places.models import Location, Map
-from portal import snapshots
+from portal import exports, snapshots
 from portal.api_types import MAX_ID, ids_from_text
 from portal.consumers import run_command
 from robots import sensors
+from robots.binding import BindingRefused, choose
+from robots.flooding import flooding
 from robots.models import Binding, RegistrationRecord, Robot
 
 TIMING_FIELDS = [
@@ -90,7 +94,7 @@ def dashboard(request):
         "robots": rows,
         "map_data": map_data,
         "locations": map_data["locations"],
-        "instructions": Instruction.objects.select_related("user")[:10],
+        "instructions": Instruction.objects.in_progress_list().select_related("user")[:10],
     }
     return render(request, "fleet/dashboard.html", context)
 
@@ -146,9 +150,11 @@ def robot_detail(request, pk: int):
         "services": Paginator(robot.services.all(), GRAPH_PAGE).get_page(request.GET.get("services")),
         "facts": _facts(robot),
         "feeds": sensors.feeds(robot),
+        "diagnostics_stale_s": sensors.DIAGNOSTICS_STALE_S,
         "map_data": _map_context(),
         "transitions": robot.transitions.select_related("instruction")[:30],
         "holds_it": row["holder"] == request.user.username,
+        "flooding": flooding(robot.endpoint),
     }
     return render(request, "fleet/robot_detail.html", context)
 
@@ -167,8 +173,6 @@ def registration(request):
 
 def _simulated_endpoints() -> list[str]:
     """Every endpoint of the simulated world that carries robots, as `make run` serves it (the prefill)."""
-    from fleetcore.world import WorldFormatError, load_world
-
     try:
         world = load_world(settings.FLEET_WORLD)
     except (OSError, WorldFormatError):
@@ -184,8 +188,6 @@ def choose_binding(request, pk: int):
     if target not in {candidate.get("target") for candidate in binding.candidates}:
         messages.error(request, f"target: {target!r} is not one of the candidates for {binding}.")
         return redirect("registration")
-    from robots.binding import BindingRefused, choose
-
     try:
         chosen = choose(binding.robot, binding.action, target, request.user)
     except BindingRefused as exc:  # a candidate of a type the action cannot use
@@ -247,8 +249,10 @@ def _timings(instruction) -> list[dict]:
 
 @requires("view")
 def history(request):
-    """Instructions, newest first, with filters and each instruction's timings."""
+    """Instructions, newest first, with filters and each instruction's timings; ?format=csv|json exports them."""
     rows, filters = _filtered_instructions(request)
+    if request.GET.get("format") in exports.FORMATS:
+        return exports.response(rows, request.GET["format"])
     page = Paginator(rows, 25).get_page(request.GET.get("page"))
     for instruction in page:
         instruction.timings = _timings(instruction)
@@ -266,6 +270,7 @@ def history(request):
 def _query_without_page(request) -> str:
     query = request.GET.copy()
     query.pop("page", None)
+    query.pop("format", None)
     return query.urlencode()
 
 
@@ -341,10 +346,20 @@ def teleop(request, pk: int):
 
 
 @requires(POST="control")
+def release_hold(request, pk: int):
+    """Release a robot a person's stop holds (access.holds): the portal may move it again."""
+    robot = _get_robot_for_user(request, pk)
+    try:
+        released = holds.release_by(request.user, [robot])
+    except holds.ControlRefused as exc:
+        return _answer(request, False, str(exc), 403)
+    detail = f"Released {robot.name} ({released[robot.name]})." if released else f"{robot.name} was not held."
+    return _answer(request, True, detail, stop_hold=None)
+
+
+@requires(POST="control")
 def lease(request, pk: int):
     """Take, renew or release control of a robot; everyone sees who holds it."""
-    from access import leases
-
     robot = _get_robot_for_user(request, pk)
     action = _payload(request).get("action", "take")
     try:

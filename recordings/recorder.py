@@ -21,6 +21,9 @@ from django.utils import timezone
 import live
 from recordings.mcapfile import RecordingWriter
 from recordings.models import Recording
+from robots.models import Robot
+from robots.poses import last_poses
+from robots.rosbridge import RosbridgeClient
 
 log = logging.getLogger(__name__)
 MAX_SECONDS = 3600
@@ -39,8 +42,6 @@ def recordings_dir() -> Path:
 
 def parse_raw_topics(values) -> list[tuple[str, str, str]]:
     """ "robot:/topic" strings as (robot, topic, type); the robot must have that topic, and it must be a Twist."""
-    from robots.models import Robot
-
     chosen = []
     for value in values:
         robot_name, _, topic = str(value).partition(":")
@@ -105,6 +106,7 @@ async def record(
     for group in groups:
         await layer.group_add(group, channel)
     raw = await _subscribe_raw(writer, raw_topics)
+    await _write_last_poses(writer, names, time.time())
     if ready is not None:
         ready.set()
     try:
@@ -126,15 +128,23 @@ async def record(
 
 
 def _robot_names() -> dict[int, str]:
-    from robots.models import Robot
-
     return dict(Robot.objects.values_list("pk", "name"))
+
+
+async def _write_last_poses(writer: RecordingWriter, names: dict[int, str], start: float) -> None:
+    """Every robot's last pose, at the recording's start: a replay at t = 0 shows the whole fleet, not only the
+    robots whose poses happened to come first."""
+    poses = await sync_to_async(last_poses)(list(names))
+    for robot_id, pose in sorted(poses.items()):
+        writer.pose(names[robot_id], pose["x"], pose["y"], pose["yaw"], start)
 
 
 async def _write(writer: RecordingWriter, message: dict, names: dict[int, str]) -> None:
     kind, now = message.get("type"), time.time()
     if kind == "fleet.poses":
         for pose in message.get("poses", []):
+            if "x" not in pose:  # refused at the gate from its first message: no place to record
+                continue
             if pose["id"] not in names:
                 names.update(await sync_to_async(_robot_names)())
             name = names.get(pose["id"], f"robot{pose['id']}")
@@ -156,9 +166,6 @@ async def _write(writer: RecordingWriter, message: dict, names: dict[int, str]) 
 
 async def _subscribe_raw(writer: RecordingWriter, raw_topics) -> list:
     """One rosbridge connection per endpoint of the chosen raw topics, each topic subscribed into the file."""
-    from robots.models import Robot
-    from robots.rosbridge import RosbridgeClient
-
     clients, by_url = [], {}
     for robot_name, topic, type_ in raw_topics:
         robot = await Robot.objects.aget(name=robot_name)

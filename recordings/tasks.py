@@ -2,9 +2,9 @@
 
 from celery import shared_task
 
+from recordings import recorder
+
 
 @shared_task(name="recordings.tasks.record", acks_late=True)
 def record(recording_pk: int) -> str:
-    from recordings import recorder
-
     return recorder.run(recording_pk).status

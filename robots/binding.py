@@ -3,9 +3,7 @@
 from ninja.errors import HttpError
 
 from audit import records as audit
-from fleetcore.bindings import norm_type
-from robots import identify
-from robots.models import Binding, Robot
+from robots.models import Binding, Robot, TargetRefused
 
 
 class BindingRefused(HttpError):
@@ -16,28 +14,12 @@ class BindingRefused(HttpError):
 
 
 def resolve_target(robot: Robot, action: str, target: str) -> tuple[str, str]:
-    """(kind, message type) of a target the robot has and the action accepts; BindingRefused says why not."""
-    found = _find(robot, target)
-    if found is None:
-        raise BindingRefused(f"target: {target!r} is not a topic or action of {robot.name}")
-    kind, type_ = found
-    if not identify.accepts(action, kind, type_):
-        raise BindingRefused(
-            f"target: {target} is a {type_ or 'untyped'} {kind}; {action} takes {identify.accepted(action)}"
-        )
-    return kind, type_
-
-
-def _find(robot: Robot, target: str) -> tuple[str, str] | None:
-    """(kind, type) of one of the robot's names; action servers are stored with its services, by their type."""
-    topic = robot.topics.filter(name=target).first()
-    if topic:
-        return Binding.Kind.TOPIC, topic.type
-    service = robot.services.filter(name=target).first()
-    if service:
-        is_action = norm_type(service.type) in identify.NAV_ACTION_TYPES
-        return (Binding.Kind.ACTION if is_action else Binding.Kind.SERVICE), service.type
-    return None
+    """(kind, message type) of a target the robot has and the action accepts (Binding.resolve); BindingRefused,
+    a 422 naming the field, says why not."""
+    try:
+        return Binding.resolve(robot, action, target)
+    except TargetRefused as exc:
+        raise BindingRefused(str(exc)) from None
 
 
 def choose(robot: Robot, action: str, target: str, user) -> Binding:

@@ -8,15 +8,32 @@ process can keep one per robot and use it from any thread or event loop.
 
 from __future__ import annotations
 
+import asyncio
+import logging
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from fleetcore import motion
 
+log = logging.getLogger(__name__)
+
 NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE = "move_base", "nav2", "simple"
 TWIST = "geometry_msgs/Twist"
+SPEED_LIMIT_TYPE = "nav2_msgs/msg/SpeedLimit"
+CALL_TIMEOUT = 2.0  # s a stop's or a speed limit's service call may take
 
 Publish = tuple[str, dict, str]  # (topic, message, message type): one rosbridge publish
+
+
+class Call(NamedTuple):
+    """One rosbridge call_service: a ROS 2 action's cancel_goal, a local planner's reconfigure."""
+
+    service: str
+    args: dict
+
+
+Command = Publish | Call
 
 
 class NoMoveTopic(RuntimeError):
@@ -64,6 +81,8 @@ class CommandSurface:
     nav_type: str = ""
     dock_target: str = ""
     dock_type: str = ""
+    speed_target: str = ""  # nav2's speed_limit topic, or move_base's local planner's set_parameters service
+    speed_kind: str = ""  # "topic" or "service"
 
     @classmethod
     def of(cls, robot, bindings=None) -> CommandSurface:
@@ -72,6 +91,7 @@ class CommandSurface:
             b.action: b for b in (bindings if bindings is not None else robot.bindings.all()) if b.target
         }
         move, navigate, dock = bound.get("move"), bound.get("navigate"), bound.get("dock")
+        speed = bound.get("speed_limit")
         return cls(
             robot_id=robot.pk,
             name=robot.name,
@@ -84,6 +104,8 @@ class CommandSurface:
             nav_type=navigate.message_type if navigate else "",
             dock_target=dock.target if dock else "",
             dock_type=(dock.message_type if dock else "") or "irobot_create_msgs/action/Dock",
+            speed_target=speed.target if speed else "",
+            speed_kind=speed.kind if speed else "",
         )
 
     # ----- velocity -----
@@ -102,12 +124,18 @@ class CommandSurface:
             self.move_type,
         )
 
-    def zero(self, t: float | None = None) -> list[Publish]:
-        """What stops the robot now: a zero velocity, and a cancel of every move_base goal when it has one."""
+    def zero(self, t: float | None = None, here: tuple | None = None) -> list[Command]:
+        """What stops the robot now: a zero velocity, then a cancel of every goal of its navigation stack, whoever
+        sent it (move_base: an empty GoalID on its cancel topic; nav2: a zero goal id to the action's
+        cancel_goal service). A goal topic has no cancel: a goal at where the robot is (`here`, when known)."""
         now = time.time() if t is None else t
-        out = [self.velocity(0.0, 0.0, now)]
+        out: list[Command] = [self.velocity(0.0, 0.0, now)]
         if self.nav_kind == NAV_MOVE_BASE:
             out.append(self.cancel_move_base("", now))
+        elif self.nav_kind == NAV_NAV2:
+            out.append(Call(f"{self.nav_namespace}/_action/cancel_goal", motion.cancel_all_goals()))
+        elif self.nav_kind == NAV_SIMPLE and here is not None:
+            out.append(self.simple_goal(here[0], here[1], here[2], now))
         return out
 
     # ----- navigation -----
@@ -127,6 +155,29 @@ class CommandSurface:
     def simple_goal(self, x: float, y: float, yaw: float, t: float) -> Publish:
         return self.nav_target, motion.pose_stamped(x, y, yaw, t, self.ros_version), self.nav_type
 
+    # ----- speed -----
+    @property
+    def can_limit_speed(self) -> bool:
+        """Whether its navigation stack takes a speed limit: nav2's SpeedLimit topic, move_base's reconfigure."""
+        return bool(self.speed_target) and self.nav_kind in (NAV_NAV2, NAV_MOVE_BASE)
+
+    def speed_limit(self, share: float | None, top: float | None = None, t: float | None = None) -> Command:
+        """Drive the navigation stack at `share` of its own top speed (None: its own top speed again).
+
+        nav2: a SpeedLimit in percent. move_base: the local planner's max_vel_x set to share x `top`, the value it
+        had (read with read_speed; set back with share None)."""
+        if self.speed_kind == "service":
+            if top is None:
+                raise ValueError(f"{self.name}: its planner's top speed is not known")
+            return Call(self.speed_target, motion.reconfigure({"max_vel_x": top * (share or 1.0)}))
+        now = time.time() if t is None else t
+        percent = None if share is None or share >= 1.0 else round(100.0 * share, 2)
+        return self.speed_target, motion.speed_limit(percent, now), SPEED_LIMIT_TYPE
+
+    def read_speed(self) -> Call | None:
+        """The call that reads the local planner's configuration (move_base); None where nothing needs reading."""
+        return Call(self.speed_target, motion.reconfigure({})) if self.speed_kind == "service" else None
+
     # ----- docking -----
     @property
     def can_dock(self) -> bool:
@@ -136,6 +187,32 @@ class CommandSurface:
     @property
     def dock_namespace(self) -> str:
         return action_namespace(self.dock_target)
+
+
+_pending: set[asyncio.Task] = set()  # calls sent on a stop's way, not waited for
+
+
+async def send(client, commands: list[Command], wait: bool = False) -> list:
+    """Send a surface's commands on an async rosbridge client, in order; a call's answer is waited for only with
+    `wait` (a stop's cancel is not: the zero went first, the cancel's answer holds no other robot's stop)."""
+    replies = []
+    for item in commands:
+        if isinstance(item, Call):
+            if wait:
+                replies.append(await client.call_service(item.service, item.args, CALL_TIMEOUT))
+                continue
+            task = asyncio.ensure_future(client.call_service(item.service, item.args, CALL_TIMEOUT))
+            _pending.add(task)
+            task.add_done_callback(_called)
+        else:
+            await client.publish(*item)
+    return replies
+
+
+def _called(task: asyncio.Task) -> None:
+    _pending.discard(task)
+    if not task.cancelled() and task.exception() is not None:
+        log.warning("a stop's service call failed: %s", task.exception())
 
 
 def surfaces(robots) -> dict[int, CommandSurface]:

@@ -29,7 +29,6 @@ import json
 import math
 import re
 from dataclasses import dataclass, field
-from urllib.parse import urlparse
 
 from fleetcore.bindings import norm_type
 from robots import limits, urdf
@@ -50,7 +49,7 @@ INFRA_SERVICE_SUFFIXES = (
     "/set_parameters_atomically",
 )
 INFRA_PARAMS = {"/rosdistro", "/rosversion", "/run_id"}
-WANTED_PARAMS = re.compile(r"robot_description$|max_vel|initial_pose|initialpose")
+WANTED_PARAMS = re.compile(r"robot_description$|max_vel|initial_pose|initialpose|/base_local_planner$")
 VELOCITY_TYPES = {"geometry_msgs/Twist", "geometry_msgs/TwistStamped"}
 ROS1_ACTION_PARTS = ("goal", "cancel", "status", "result", "feedback")
 
@@ -262,8 +261,15 @@ async def _nodes(client: RosbridgeClient, graph: Graph, nodes, sem: asyncio.Sema
                     getattr(info, side).append(name)
 
 
+def _planner_reconfigure(name: str, ros_version: int) -> bool:
+    """A ROS 1 move_base plugin's dynamic_reconfigure service (`.../move_base/<Plugin>/set_parameters`): not
+    infrastructure, it is how a local planner takes its top speed (the speed_limit binding)."""
+    parts = name.rsplit("/", 3)
+    return ros_version == 1 and len(parts) == 4 and parts[1] == "move_base" and parts[3] == "set_parameters"
+
+
 async def _services(client: RosbridgeClient, graph: Graph, services, sem: asyncio.Semaphore) -> None:
-    names = [s for s in services if not is_infra(s, "service")]
+    names = [s for s in services if not is_infra(s, "service") or _planner_reconfigure(s, graph.ros_version)]
     replies = await asyncio.gather(
         *(_bounded(sem, rosapi(client, "/rosapi/service_type", {"service": s})) for s in names),
         return_exceptions=True,
@@ -415,12 +421,6 @@ def decode_param(text):
         return json.loads(text)
     except (TypeError, ValueError):
         return text
-
-
-def endpoint_label(url: str) -> str:
-    """`host-port` of an endpoint URL, the name of an unnamed robot."""
-    parsed = urlparse(url)
-    return f"{parsed.hostname or 'robot'}-{parsed.port or 9090}"
 
 
 async def start_pose(

@@ -27,6 +27,8 @@ import socket
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
+from django.conf import settings
+
 from robots.rosbridge.errors import RosbridgeError, UnreachableError
 
 SCHEMES = {"ws": 80, "wss": 443}
@@ -136,3 +138,8 @@ def _plain(address: Address) -> Address:
     """An IPv4-mapped IPv6 address (::ffff:10.0.0.1) is the IPv4 address it maps."""
     mapped = getattr(address, "ipv4_mapped", None)
     return mapped if mapped is not None else address
+
+
+def allow_list() -> AllowList:
+    """The networks and hosts robots may be registered from (settings.FLEET_ROBOT_ALLOWED_NETWORKS)."""
+    return AllowList.parse(settings.FLEET_ROBOT_ALLOWED_NETWORKS)

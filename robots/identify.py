@@ -35,8 +35,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from fleetcore.bindings import ESSENTIAL as ESSENTIAL_ROLES
-from fleetcore.bindings import NAV_ACTION_SERVERS, ROLES
-from robots.discovery import Graph, norm_type
+from fleetcore.bindings import NAV_ACTION_SERVERS, RECONFIGURE, ROLES
+from robots.discovery import Graph, decode_param, norm_type
 
 ACTIONS = tuple(ROLES)  # the binding roles (fleetcore/bindings.py): the one table of types and keywords
 ESSENTIAL = set(ESSENTIAL_ROLES)
@@ -60,6 +60,8 @@ def accepts(action: str, kind: str, type_: str) -> bool:
     type_ = norm_type(type_)
     if kind == "topic":
         return type_ in rule.types
+    if kind == "service":
+        return action == "speed_limit" and type_ == RECONFIGURE
     if kind != "action":
         return False
     return (action == "navigate" and type_ in NAV_ACTION_TYPES) or type_ in rule.types  # dock: its own type
@@ -72,7 +74,8 @@ def accepted(action: str) -> str:
         return "nothing (not an action)"
     topics = " or ".join(sorted(rule.types))
     servers = " or ".join(sorted(NAV_ACTION_TYPES)) if action == "navigate" else ""
-    return f"a {topics} topic" + (f", or a {servers} action server" if servers else "")
+    service = f", or a {RECONFIGURE} service (a local planner's)" if action == "speed_limit" else ""
+    return f"a {topics} topic" + (f", or a {servers} action server" if servers else "") + service
 
 
 NAV_NODES = {"move_base", "controller_server", "velocity_smoother", "bt_navigator"}
@@ -213,7 +216,22 @@ def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:
             continue  # another action server (arm, spin, dock), or one whose goals we cannot send
         bonus = 0.1 if any(k in type_ for k in ("MoveBase", "NavigateToPose")) else 0.0
         found["navigate"].append(Candidate(name, type_, "action", round(0.6 + score + bonus, 4), how))
+    found["speed_limit"] += local_planners(graph)
     return found
+
+
+def local_planners(graph: Graph) -> list[Candidate]:
+    """move_base's local planner's dynamic_reconfigure service (`<move_base>/<plugin class>/set_parameters`, the
+    plugin named by the `base_local_planner` param): where a ROS 1 navigation stack takes its top speed."""
+    out = []
+    for name, value in graph.params.items():
+        plugin = decode_param(value) if name.endswith("/base_local_planner") else None
+        if not isinstance(plugin, str) or not plugin:
+            continue
+        service = f"{name.removesuffix('/base_local_planner')}/{plugin.rsplit('/', 1)[-1]}/set_parameters"
+        if norm_type(graph.services.get(service, "")) == RECONFIGURE:
+            out.append(Candidate(service, graph.services[service], "service", 0.9, "exact"))
+    return out
 
 
 def identify(
@@ -247,6 +265,8 @@ def _lookup(graph: Graph, action: str, target: str) -> tuple[str, str] | None:
         found = "topic", graph.topics[target].type
     elif target in graph.actions:
         found = "action", graph.actions[target]
+    elif target in graph.services:
+        found = "service", graph.services[target]
     else:
         return None
     return found if accepts(action, *found) else None

@@ -7,7 +7,9 @@ are untrusted input"), and each refusal names the setting to raise:
 - frame_bytes: one WebSocket frame, and one reassembled rosbridge `fragment` message (the client closes the
   link on a bigger frame: websockets reads the length first, so the frame is never held in memory);
 - topics: the topics one endpoint lists (its robots' graphs are stored and shown, row by row);
-- urdf_bytes: one robot_description (parsed as XML into memory).
+- urdf_bytes: one robot_description (parsed as XML into memory);
+- frames_per_s: inbound frames per endpoint link and second (a token bucket holding one second's worth; what
+  exceeds it is dropped unread and counted, so one flooding endpoint cannot starve the others' links).
 
 The process-wide values are set once from Django settings (robots.apps.RobotsConfig.ready) and again when a
 test overrides a setting; every RosbridgeClient and every registration reads them through current().
@@ -22,6 +24,7 @@ MB = 1024 * 1024
 FRAME_SETTING = "FLEET_ROBOT_MAX_FRAME_MB"
 TOPICS_SETTING = "FLEET_ROBOT_MAX_TOPICS"
 URDF_SETTING = "FLEET_ROBOT_MAX_URDF_MB"
+RATE_SETTING = "FLEET_ROBOT_MAX_FRAMES_PER_S"
 
 
 @dataclass(frozen=True)
@@ -31,6 +34,7 @@ class Limits:
     frame_bytes: int = 16 * MB
     topics: int = 100_000
     urdf_bytes: int = 4 * MB
+    frames_per_s: int = 2000  # a warehouse endpoint's 14 robots at 20 Hz odometry send 280
 
 
 _current = Limits()

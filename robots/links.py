@@ -38,6 +38,7 @@ from django.utils import timezone
 import alerts
 import live
 from fleetcore.states import Event
+from robots import commands
 from robots.commands import CommandSurface, surfaces
 from robots.models import Robot
 from robots.rosbridge import RosbridgeClient
@@ -106,8 +107,20 @@ def set_link_status(url: str, up: bool, reason: str = "") -> list[str]:
             alerts.raise_alert(
                 "robot_offline", robot, f"link to {url} lost{f' ({reason})' if reason else ''}"
             )
+    if up:
+        settle_offline_alerts(url, changed)
     follow_link_in_state_machine(url, up)
     return changed
+
+
+def settle_offline_alerts(url: str, settled: list[str]) -> None:
+    """Resolve the offline alerts still open for robots behind a link that is up, whose status did not change:
+    left by a shutdown or a restart of this process (registration had already written them online)."""
+    left = Robot.objects.filter(
+        endpoint=url, alerts__kind="robot_offline", alerts__resolved_at__isnull=True
+    ).exclude(name__in=settled)
+    for robot in left.distinct():
+        alerts.resolve_alert("robot_offline", robot, "link up (the alert was left open from before)")
 
 
 async def pay_zeros(client: RosbridgeClient, url: str) -> list[str]:
@@ -115,8 +128,7 @@ async def pay_zeros(client: RosbridgeClient, url: str) -> list[str]:
     owed = await sync_to_async(zeros_owed)(url)
     for robot in owed:
         try:
-            for topic, message, type_ in robot.zero():
-                await client.publish(topic, message, type_)
+            await commands.send(client, robot.zero())
         except Exception as exc:  # down again: still owed, paid on the next reconnection
             log.warning("%s: zero for %s not sent: %s", url, robot.name, exc)
             return []
@@ -148,6 +160,16 @@ def registered_endpoints() -> list[str]:
     return sorted(set(Robot.objects.values_list("endpoint", flat=True)))
 
 
+def stop_targets(urls: Iterable[str]) -> dict[str, CommandSurface]:
+    """{robot name: its command surface} of the robots behind these endpoints that can be driven (one query)."""
+    close_old_connections()
+    found = surfaces(Robot.objects.filter(endpoint__in=list(urls)).prefetch_related("bindings"))
+    return {surface.name: surface for surface in found.values() if surface.can_move}
+
+
+STOP_PUBLISH_S = 0.5  # one robot's zero on a link that is up; a stuck send never holds another robot's
+
+
 class LinkManager:
     """Keep one link per endpoint until stop() is called."""
 
@@ -157,6 +179,7 @@ class LinkManager:
         self.links: dict[str, RosbridgeClient] = {}
         self.changes: asyncio.Queue[tuple[str, bool]] = asyncio.Queue()
         self.stopping = asyncio.Event()
+        self.targets: dict[str, CommandSurface] = {}  # by robot name: what a stop asked of us zeroes
 
     async def run(self) -> None:
         """Run until stop(): add links for endpoints, write status changes, refresh last_seen."""
@@ -186,6 +209,42 @@ class LinkManager:
                     log.exception("%s: could not start its link", url)
         online = [u for u, c in self.links.items() if c.is_connected]
         await sync_to_async(touch)(online)
+        self.targets = await sync_to_async(stop_targets)(list(self.links))
+
+    async def zero(self, names: list[str] | str) -> dict:
+        """Publish the zero of each named robot ("all": every one) on its link, all at once, from memory (no
+        database, no Redis): {"zeroed": names, "missed": {name: why}, "unknown": names}. A name not known here
+        zeroes nothing (the caller's interpretation decides what the text meant)."""
+        targets = {name.casefold(): target for name, target in self.targets.items()}
+        wanted = sorted(targets) if names == "all" else list(dict.fromkeys(n.casefold() for n in names))
+        unknown = [name for name in wanted if name not in targets]
+        if unknown:
+            return {"zeroed": [], "missed": {}, "unknown": unknown}
+        wanted = [targets[name].name for name in wanted]
+        targets = {target.name: target for target in targets.values()}
+        sent = await asyncio.gather(*(self._zero_one(targets[name]) for name in wanted))
+        missed = {name: why for name, why in zip(wanted, sent, strict=True) if why}
+        return {"zeroed": [name for name in wanted if name not in missed], "missed": missed, "unknown": []}
+
+    async def _zero_one(self, target: CommandSurface) -> str:
+        """ "" once the robot's zero is out, else why not."""
+        client = self.links.get(target.endpoint)
+        if client is None or not client.is_connected:
+            return "its link is not up"
+        try:
+            async with asyncio.timeout(STOP_PUBLISH_S):
+                await commands.send(client, target.zero())  # a nav2 goal's cancel is not waited for
+        except Exception as exc:  # down meanwhile, or stuck: the caller stops it on its own link
+            return f"not sent: {exc!r}"
+        return ""
+
+    def linked(self) -> list[str]:
+        """The robots whose link is up now."""
+        return sorted(name for name, t in self.targets.items() if self._up(t.endpoint))
+
+    def _up(self, url: str) -> bool:
+        client = self.links.get(url)
+        return client is not None and client.is_connected
 
     async def add(self, url: str) -> RosbridgeClient:
         """Open a link to url and run the hooks on it (robots read first: if that fails, the next round retries)."""

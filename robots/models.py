@@ -8,9 +8,12 @@ from django.db import models
 from django.utils import timezone
 
 import live
-from fleetcore.bindings import ROLES
+from fleetcore import grammar
+from fleetcore.bindings import ROLES, norm_type
 from fleetcore.states import IllegalTransition, next_state
 from fleetcore.states import State as RobotState
+from robots import endpoints, identify
+from robots.rosbridge.errors import RosbridgeError
 
 log = logging.getLogger(__name__)
 
@@ -34,39 +37,23 @@ class RobotManager(models.Manager):
                 return current._record_transition(to_state, reason, instruction)
         return None
 
-    def force_state(self, robot, to_state: str, reason: str, instruction=None):
-        """Set a state whatever the current one (recovery); None if already there."""
-        robot_id = robot if isinstance(robot, int) else robot.pk
-        current = self.get(pk=robot_id)
-        if current.state == to_state or not self.filter(pk=robot_id, state=current.state).update(
-            state=to_state
-        ):
-            return None
-        return current._record_transition(to_state, reason, instruction)
-
 
 ROBOT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*")
-# Words instructions use to join steps and choose robots (interpreter.lexicon's AND, THEN, ALL, PREP): a robot
-# named one of them would read as grammar ("move and to A"). Names are data; they must never parse as words.
-RESERVED_NAMES = frozenset({
-    "and", "or", "plus", "also", "then", "next", "later", "finally", "all", "every", "each", "everyone",
-    "everybody", "everything", "fleet", "to", "at", "in", "on", "into", "towards", "toward", "till", "until",
-    "onto", "stop", "times",
-})  # fmt: skip
 
 
 def validate_robot_name(name: str) -> None:
     """Letters, digits, dash and underscore, starting with a letter or digit; not only digits; not a word
-    instructions use. So a name is one word the interpreter can only read as that robot."""
+    instructions use (the parser's own keywords: fleetcore.grammar.reserved). So a name is one word the
+    interpreter can only read as that robot, never as grammar ("move and to A")."""
     if not ROBOT_NAME.fullmatch(name or ""):
         raise ValidationError(
             "%(name)r: a robot name uses letters, digits, dashes and underscores only (no spaces).",
             code="robot_name",
             params={"name": name},
         )
-    if name.isdigit() or name.casefold() in RESERVED_NAMES:
+    if name.isdigit() or grammar.reserved(name):
         raise ValidationError(
-            "%(name)r: a robot name must not be a number or a word instructions use (and, then, all, to, ...).",
+            "%(name)r: a robot name must not be a number or a word instructions use (and, then, to, from, slowly, stop, ...).",
             code="robot_name_reserved",
             params={"name": name},
         )
@@ -76,7 +63,7 @@ def robot_name_from(text: str) -> str:
     """A valid robot name made from what a robot says of itself (URDF name, namespace) or its host-port:
     other characters become dashes; a number or a reserved word gets the prefix "robot-"."""
     name = re.sub(r"[^A-Za-z0-9_-]+", "-", text or "").strip("-_")[:90] or "robot"
-    return f"robot-{name}" if name.isdigit() or name.casefold() in RESERVED_NAMES else name
+    return f"robot-{name}" if name.isdigit() or grammar.reserved(name) else name
 
 
 class Robot(models.Model):
@@ -122,6 +109,13 @@ class Robot(models.Model):
     description = models.JSONField(default=dict, blank=True, help_text="facts read from the URDF")
     registered_at = models.DateTimeField(default=timezone.now)
     updated_at = models.DateTimeField(auto_now=True)
+    # A stop's hold (access.holds): a robot a person stopped stays put; nothing automatic moves it until a
+    # person releases it or gives it an instruction naming it. Held while held_at is set.
+    held_at = models.DateTimeField(null=True, blank=True)
+    held_by = models.ForeignKey(
+        "auth.User", null=True, blank=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    held_reason = models.CharField(max_length=40, blank=True, help_text='what holds it, e.g. "a stop"')
 
     objects = RobotManager()
 
@@ -138,6 +132,14 @@ class Robot(models.Model):
 
     def __str__(self):
         return self.name
+
+    @property
+    def hold_words(self) -> str | None:
+        """ "held by a stop (admin, 10:43:44)" while a stop holds the robot, else None (the pages, the API)."""
+        if self.held_at is None:
+            return None
+        who = self.held_by.username if self.held_by_id else "a user since deleted"
+        return f"held by {self.held_reason or 'a stop'} ({who}, {timezone.localtime(self.held_at):%H:%M:%S})"
 
     def transition(self, event: str, reason: str = "", instruction=None):
         """Apply an event to this robot's state; see RobotManager.transition."""
@@ -162,18 +164,10 @@ class Robot(models.Model):
 
     def clean(self):
         """An endpoint typed in the admin is checked as registration checks it, and stored by its address."""
-        from robots import endpoints
-        from robots.registration import allow_list
-        from robots.rosbridge import RosbridgeError
-
         try:
-            self.endpoint = endpoints.check(self.endpoint, allow_list())
+            self.endpoint = endpoints.check(self.endpoint, endpoints.allow_list())
         except RosbridgeError as exc:
             raise ValidationError({"endpoint": str(exc)}) from None
-
-    def topic_name(self, relative: str) -> str:
-        """Resolve a robot-relative topic name under this robot's namespace."""
-        return f"{self.namespace.rstrip('/')}/{relative.lstrip('/')}"
 
 
 class Topic(models.Model):
@@ -277,12 +271,39 @@ class Binding(models.Model):
         """A target must be one of the robot's names, of a type the action accepts (the admin's forms ask this)."""
         if not self.target or self.robot_id is None:
             return
-        from robots.binding import BindingRefused, resolve_target
-
         try:
-            self.kind, self.message_type = resolve_target(self.robot, self.action, self.target)
-        except BindingRefused as exc:
-            raise ValidationError({"target": exc.message}) from None
+            self.kind, self.message_type = Binding.resolve(self.robot, self.action, self.target)
+        except TargetRefused as exc:
+            raise ValidationError({"target": str(exc)}) from None
+
+    @staticmethod
+    def resolve(robot: Robot, action: str, target: str) -> tuple[str, str]:
+        """(kind, message type) of a target the robot has and the action accepts; TargetRefused says why not."""
+        found = _target_of(robot, target)
+        if found is None:
+            raise TargetRefused(f"target: {target!r} is not a topic or action of {robot.name}")
+        kind, type_ = found
+        if not identify.accepts(action, kind, type_):
+            raise TargetRefused(
+                f"target: {target} is a {type_ or 'untyped'} {kind}; {action} takes {identify.accepted(action)}"
+            )
+        return kind, type_
+
+
+class TargetRefused(ValueError):
+    """A binding's target the robot does not have, or of a type its action cannot use."""
+
+
+def _target_of(robot: Robot, target: str) -> tuple[str, str] | None:
+    """(kind, type) of one of the robot's names; action servers are stored with its services, by their type."""
+    topic = robot.topics.filter(name=target).first()
+    if topic:
+        return Binding.Kind.TOPIC, topic.type
+    service = robot.services.filter(name=target).first()
+    if service:
+        is_action = norm_type(service.type) in identify.NAV_ACTION_TYPES
+        return (Binding.Kind.ACTION if is_action else Binding.Kind.SERVICE), service.type
+    return None
 
 
 class RegistrationRecord(models.Model):

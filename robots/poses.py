@@ -3,6 +3,11 @@
 A robot's map pose is its odometry composed with its start pose (the odometry origin on the map); once an
 amcl pose arrives, the map->odom offset is corrected from it, so later odometry stays on the map.
 
+Odometry passes the robot's gate first (fleetcore.posegate: no NaN or infinity, no jump faster than the robot,
+no stamp from the future). A refused message leaves the last good pose in place and flags it: the pose carries
+`fault` (the reason) and `fault_since` until the odometry is good again, and an odometry_invalid alert is raised
+(resolved when it is good again). Each pose carries `t`, when it was taken: its age is how stale it is.
+
 How the link process (``manage.py robotlinks``) drives it::
 
     hub = PoseHub()                                   # one per process, in its event loop
@@ -25,13 +30,21 @@ import time
 from collections import defaultdict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from datetime import UTC, datetime
 
 from asgiref.sync import sync_to_async
 from channels.layers import get_channel_layer
 from django.core.cache import cache
+from django.db import close_old_connections
+from django.utils import timezone
 
+import alerts
 import live
-from fleetcore.geometry import Pose2D, compose, inverse, pose_of, start_offset, twist_of
+from fleetcore.geometry import Pose2D, compose, inverse, pose_of, start_offset
+from fleetcore.posegate import InvalidOdometry, PoseGate
+from robots.models import Robot
+from robots.rosbridge.client import RosbridgeClient
+from robots.rosbridge.errors import RosbridgeError
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +66,7 @@ class Subscription:
 
 
 POSE_TTL_S = 60  # a robot not heard of for this long has no last pose
+STALE_S = 2.0  # a pose older than this is stale: the page, the API and the answers say so, with its age
 
 
 def store_poses(batch: list[live.RobotPose]) -> None:
@@ -61,19 +75,99 @@ def store_poses(batch: list[live.RobotPose]) -> None:
 
 
 def store_pose(robot_id: int, pose: Pose2D) -> None:
-    """Keep one robot's pose (an executor's own odometry, between the pose hub's ticks)."""
+    """Keep one robot's pose (an executor's own odometry, between the pose hub's ticks), taken now."""
     x, y, yaw = pose
-    store_poses([live.RobotPose(id=robot_id, x=round(x, 3), y=round(y, 3), yaw=round(yaw, 4))])
+    store_poses(
+        [{"id": robot_id, "x": round(x, 3), "y": round(y, 3), "yaw": round(yaw, 4), "t": time.time()}]
+    )
 
 
-def last_poses(robot_ids) -> dict[int, dict]:
-    """{robot id: {"id", "x", "y", "yaw", ...}} for the robots whose pose is known."""
+def _cached(robot_ids) -> list[dict]:
     try:
         found = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in robot_ids])
     except Exception:  # the cache is away: no pose is known, callers plan without them
         log.warning("last poses unavailable", exc_info=True)
-        return {}
-    return {pose["id"]: pose for pose in found.values() if isinstance(pose, dict) and "id" in pose}
+        return []
+    return [pose for pose in found.values() if isinstance(pose, dict) and "id" in pose]
+
+
+def last_poses(robot_ids) -> dict[int, dict]:
+    """{robot id: {"id", "x", "y", "yaw", ...}} for the robots whose pose is known (the last good one of a
+    robot whose odometry is refused now, with its `fault`)."""
+    return {pose["id"]: pose for pose in _cached(robot_ids) if "x" in pose}
+
+
+def pose_faults(robot_ids) -> dict[int, dict]:
+    """{robot id: its last pose record} for the robots whose odometry the gate refuses now ("fault", "fault_since")."""
+    return {pose["id"]: pose for pose in _cached(robot_ids) if pose.get("fault")}
+
+
+def clock_words(unix: float | None) -> str:
+    """A unix time as the local wall clock a person reads ("10:43:02")."""
+    if unix is None:
+        return "an unknown time"
+    return timezone.localtime(datetime.fromtimestamp(unix, tz=UTC)).strftime("%H:%M:%S")
+
+
+def fault_words(name: str, pose: dict) -> str:
+    """ "robot5's odometry is invalid (x is NaN) since 10:43:02": the one wording of a refused odometry."""
+    return f"{name}'s odometry is invalid ({pose['fault']}) since {clock_words(pose.get('fault_since'))}"
+
+
+def pose_age(pose: dict | None, now: float | None = None) -> float | None:
+    """Seconds since the pose was taken; None when it carries no time (or there is none)."""
+    if not pose or not isinstance(pose.get("t"), int | float):
+        return None
+    return max(0.0, (time.time() if now is None else now) - pose["t"])
+
+
+def pose_words(pose: dict | None, now: float | None = None) -> str:
+    """The one wording of a pose's health: "odometry invalid: x is NaN", "stale (3.2 s)", "live" or "no pose"."""
+    if pose and pose.get("fault"):
+        return f"odometry invalid: {pose['fault']}"
+    age = pose_age(pose, now)
+    if age is None:
+        return "no pose"
+    return f"stale ({age:.1f} s)" if age > STALE_S else "live"
+
+
+def freshness(robots) -> dict[int, dict]:
+    """Each robot's pose health as the API says it: {"last_seen", "pose_age", "stale", "pose_fault",
+    "pose_status"}. last_seen is the freshest sign of life, the link's heartbeat (written every few seconds,
+    and not at all while the links process is stuck) or the last pose (taken up to 10 times a second)."""
+    robots = list(robots)
+    cached = {pose["id"]: pose for pose in _cached([robot.pk for robot in robots])}
+    now = time.time()
+    found = {}
+    for robot in robots:
+        pose = cached.get(robot.pk)
+        age = pose_age(pose, now)
+        seen = robot.last_seen
+        if age is not None and (seen is None or seen.timestamp() < pose["t"]):
+            seen = datetime.fromtimestamp(pose["t"], tz=UTC)
+        found[robot.pk] = {
+            "last_seen": seen,
+            "pose_age": None if age is None else round(age, 1),
+            "stale": bool(pose and pose.get("fault")) or (age is not None and age > STALE_S),
+            "pose_fault": (pose or {}).get("fault"),
+            "pose_status": pose_words(pose, now),
+        }
+    return found
+
+
+def report_faults(changes: dict[int, tuple[str | None, float | None]]) -> None:
+    """Raise an odometry_invalid alert for each robot the gate began refusing, resolve it when it is good again."""
+    close_old_connections()
+    robots = Robot.objects.in_bulk(list(changes))
+    for robot_id, (reason, since) in changes.items():
+        robot = robots.get(robot_id)
+        if robot is None:
+            continue
+        if reason is None:
+            alerts.resolve_alert("odometry_invalid", robot, "odometry valid again")
+        else:
+            words = fault_words(robot.name, {"fault": reason, "fault_since": since})
+            alerts.raise_alert("odometry_invalid", robot, f"{words}: its moves fail until it is good again")
 
 
 async def publish_to_channels(batch: list[live.RobotPose]) -> None:
@@ -94,10 +188,12 @@ class PoseHub:
         publish: Callable[[list[live.RobotPose]], Awaitable[None]] = publish_to_channels,
         rate_hz: float = DEFAULT_RATE_HZ,
         clock: Callable[[], float] = time.time,
+        report: Callable[[dict], None] = report_faults,
     ) -> None:
         if not 0 < rate_hz <= 50:
             raise ValueError(f"rate_hz: must be in (0, 50], got {rate_hz}")
         self.publish = publish
+        self.report = report  # the robots whose gate began or stopped refusing: alerts, from a thread
         self.period = 1.0 / rate_hz
         self.clock = clock
         self._lock = threading.Lock()
@@ -106,21 +202,24 @@ class PoseHub:
         self._latest: dict[int, live.RobotPose] = {}
         self._extras: dict[int, dict] = defaultdict(dict)  # battery (percent), rtt (ms): carried in each pose
         self._dirty: set[int] = set()
+        self._gates: dict[int, PoseGate] = {}
+        self._faults: dict[int, tuple[str | None, float | None]] = {}  # changes not yet reported
 
-    def track(self, robot_id: int, start_pose=None) -> None:
-        """Start (or restart) following a robot from its start pose."""
+    def track(self, robot_id: int, start_pose=None, max_linear: float = 0.0) -> None:
+        """Start (or restart) following a robot from its start pose, its odometry gated at its top speed."""
         with self._lock:
             self._offsets[robot_id] = start_offset(start_pose)
+            self._gates[robot_id] = PoseGate(max_linear)
 
     def forget(self, robot_id: int) -> None:
         with self._lock:
-            for table in (self._offsets, self._raw_odometry, self._latest, self._extras):
+            for table in (self._offsets, self._raw_odometry, self._latest, self._extras, self._gates):
                 table.pop(robot_id, None)
             self._dirty.discard(robot_id)
 
     def subscriptions(self, robot) -> list[Subscription]:
         """What to subscribe for one robot: its bound odometry, and its amcl pose when bound."""
-        self.track(robot.pk, robot.start_pose)
+        self.track(robot.pk, robot.start_pose, robot.max_linear)
         bindings = {binding.action: binding for binding in robot.bindings.all() if binding.target}
         throttle = int(self.period * 1000)
         subs = []
@@ -151,25 +250,47 @@ class PoseHub:
         return callback
 
     def on_odometry(self, robot_id: int, message: dict) -> None:
-        """Take one nav_msgs/Odometry: compose with the robot's offset and keep it as the latest."""
-        raw = pose_of(message)
-        linear, angular = twist_of(message)
+        """Take one nav_msgs/Odometry through the robot's gate: compose with its offset, keep it as the latest;
+        a refused one flags the last good pose instead."""
+        now = self.clock()
         with self._lock:
-            self._raw_odometry[robot_id] = raw
+            gate = self._gates.setdefault(robot_id, PoseGate(0.0))
+            was = gate.fault
+            try:
+                reading = gate.admit(message, now)
+            except InvalidOdometry:
+                self._flag(robot_id, gate, was)
+                return
+            if was is not None:
+                self._faults[robot_id] = (None, None)
+            raw = self._raw_odometry[robot_id] = reading.pose
             offset = self._offsets.setdefault(robot_id, (0.0, 0.0, 0.0))
             x, y, yaw = compose(offset, raw)
             self._latest[robot_id] = live.RobotPose(
                 id=robot_id, x=round(x, 3), y=round(y, 3), yaw=round(yaw, 3),
-                v=round(linear, 3), w=round(angular, 3), t=self.clock(), **self._extras.get(robot_id, {}),
+                v=round(reading.v, 3), w=round(reading.w, 3), t=now, **self._extras.get(robot_id, {}),
             )  # fmt: skip
             self._dirty.add(robot_id)
 
+    def _flag(self, robot_id: int, gate: PoseGate, was: str | None) -> None:
+        """The last good pose (or none) with the gate's reason, pushed every tick while it refuses."""
+        if was is None:
+            self._faults[robot_id] = (gate.fault, gate.since)
+            log.warning("robot %s: odometry refused (%s)", robot_id, gate.fault)
+        base = self._latest.get(robot_id) or {"id": robot_id}
+        self._latest[robot_id] = {**base, "fault": gate.fault, "fault_since": gate.since}
+        self._dirty.add(robot_id)
+
     def on_amcl(self, robot_id: int, message: dict) -> None:
-        """Take an amcl pose (map frame): correct the map->odom offset so odometry lands where amcl says."""
+        """Take an amcl pose (map frame): correct the map->odom offset so odometry lands where amcl says. While
+        the robot's odometry is refused its flagged pose stands: an amcl pose must not clear the flag."""
         in_map = pose_of(message)
         with self._lock:
             raw = self._raw_odometry.get(robot_id)
             self._offsets[robot_id] = compose(in_map, inverse(raw)) if raw else in_map
+            gate = self._gates.get(robot_id)
+            if gate is not None and gate.fault is not None:
+                return  # its odometry is refused: the flagged last good pose stands, amcl rides on that odometry
             previous = self._latest.get(robot_id, {})
             self._latest[robot_id] = live.RobotPose(
                 id=robot_id, x=round(in_map[0], 3), y=round(in_map[1], 3), yaw=round(in_map[2], 3),
@@ -205,13 +326,21 @@ class PoseHub:
         return batch
 
     async def flush(self) -> int:
-        """Publish one tick; return how many robots it carried."""
+        """Publish one tick (and report the robots whose gate began or stopped refusing); return how many
+        robots it carried."""
         batch = self.take_batch()
         if batch:
             try:
                 await self.publish(batch)
             except Exception:  # a hiccup of Redis must not end the stream
                 log.exception("pose batch of %d robots not published", len(batch))
+        with self._lock:
+            faults, self._faults = self._faults, {}
+        if faults:
+            try:
+                await sync_to_async(self.report, thread_sensitive=False)(faults)
+            except Exception:  # the database away: the flag still rides on the poses
+                log.exception("odometry faults of %d robots not reported", len(faults))
         return len(batch)
 
     async def run(self, stop: asyncio.Event | None = None) -> None:
@@ -244,8 +373,6 @@ async def subscribe_all(client, subs: list[Subscription]) -> None:
 
 async def measure_round_trips(client, robot_ids, hub: PoseHub, stop: asyncio.Event | None = None) -> None:
     """Ping the endpoint's link every ROUND_TRIP_EVERY_S and give the hub the round trip of its robots."""
-    from robots.rosbridge.errors import RosbridgeError
-
     stop = stop or asyncio.Event()
     while not stop.is_set() and not client.closed:
         with contextlib.suppress(RosbridgeError):
@@ -262,8 +389,6 @@ async def stream_endpoint(
 ) -> None:
     """Follow the given topics on one endpoint until stopped, on a link of its own that reconnects by itself
     (and, given the hub, measure the link's round trip for the robots it carries)."""
-    from robots.rosbridge.client import RosbridgeClient
-
     client = RosbridgeClient(url, reconnect=True)
     await client.start()
     try:
@@ -277,9 +402,6 @@ async def stream_endpoint(
 
 def link_hook(hub: PoseHub):
     """A robots.links hook: on each endpoint's link, subscribe every robot's poses for the hub."""
-    from asgiref.sync import sync_to_async
-
-    from robots.models import Robot
 
     def robots_of(url: str) -> list:
         return list(Robot.objects.filter(endpoint=url).prefetch_related("bindings"))

@@ -85,7 +85,7 @@ async def discover_all(
     urls: list[str], call_timeout: float = 3.0, allowed: endpoints.AllowList | None = None
 ) -> list[tuple[str, list[Graph] | RosbridgeError]]:
     """(canonical URL or "", graphs or error) per URL; aliases of one endpoint are discovered once."""
-    allowed = allowed or allow_list()
+    allowed = allowed or endpoints.allow_list()
     resolved = await asyncio.gather(*(endpoints.resolve(u, allowed) for u in urls), return_exceptions=True)
     unique = list(dict.fromkeys(r for r in resolved if isinstance(r, str)))
     gate = asyncio.Semaphore(ENDPOINTS_AT_ONCE)
@@ -106,10 +106,6 @@ def _as_error(url: str, exc: BaseException) -> RosbridgeError:
         return exc
     log.error("%s: could not check the URL", url, exc_info=exc)
     return RosbridgeError(f"{url[:URL_SHOWN]}: refused: not a URL the portal can check")
-
-
-def allow_list() -> endpoints.AllowList:
-    return endpoints.AllowList.parse(settings.FLEET_ROBOT_ALLOWED_NETWORKS)
 
 
 # ----- the entry point -----

@@ -28,6 +28,7 @@ SLOW_HZ = 5.0  # laser (TB3 LDS 5 Hz), actionlib status (5 Hz)
 AMCL_HZ = 2.0
 DOCK_STATUS_HZ = 1.0
 BATTERY_HZ = 1.0
+DIAGNOSTICS_HZ = 1.0  # diagnostic_updater's default period is 1 s
 CAMERA_HZ = 2.0  # the synthetic camera: small frames at a low rate
 STACKS = {"move_base": MoveBase, "nav2": Nav2}
 
@@ -79,6 +80,7 @@ class SimFleet:
                 port = 0 if port_base is None else port_base + ep.port_offset
                 self.servers[ep.key] = RosbridgeServer(ep.key, Graph(ep.ros_version, self.clock), port)
         self.robots: dict[str, SimRobot] = {}
+        self.diagnostics_turn = 0  # whose diagnostics go next (simworker.diagnostics, once a second each)
         self.stacks: list = []
         self.docks: list[DockServer] = []
         planners: dict[str, Planner] = {}
@@ -147,7 +149,7 @@ class SimFleet:
         loop = asyncio.get_running_loop()
         period = self.physics.dt / self.time_scale
         next_t = self.stats.started = loop.time()
-        due = dict.fromkeys(("odom", "nav", "slow", "amcl", "dock", "battery", "camera"), 0.0)
+        due = dict.fromkeys(("odom", "nav", "slow", "amcl", "dock", "battery", "diagnostics", "camera"), 0.0)
         while not self._stop.is_set():
             self.physics.step()
             self.stats.steps += 1
@@ -196,10 +198,20 @@ class SimFleet:
             due["battery"] += 1.0 / BATTERY_HZ
             for robot in self.robots.values():
                 robot.publish_battery(stamp, 1.0 / BATTERY_HZ)
+        self._publish_diagnostics(t, stamp, due)
         if t >= due["camera"]:
             due["camera"] += 1.0 / CAMERA_HZ
             for robot in self.robots.values():
                 robot.publish_camera(stamp)
+
+    def _publish_diagnostics(self, t: float, stamp: float, due: dict[str, float]) -> None:
+        """Each robot's diagnostics once a second, the robots' turns spread over the second (real robots' nodes
+        are not in step; a throttled subscriber to a shared /diagnostics would otherwise only see the first)."""
+        robots = list(self.robots.values())
+        while robots and t >= due["diagnostics"]:
+            due["diagnostics"] += 1.0 / (DIAGNOSTICS_HZ * len(robots))
+            robots[self.diagnostics_turn % len(robots)].publish_diagnostics(stamp)
+            self.diagnostics_turn += 1
 
     def pose(self, name: str) -> tuple[float, float, float]:
         """Return a robot's ground-truth pose (call from the loop's thread)."""

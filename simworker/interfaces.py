@@ -37,9 +37,9 @@ def build_interface(profile: ModelProfile, ns: str, ros_version: int, stack: str
     iface = Interface()
     builder(iface, ns, stack)
     if stack == "move_base":
-        _move_base(iface, ns)
+        _move_base(iface, ns, profile)
     elif stack == "nav2":
-        _nav2(iface, ns)
+        _nav2(iface, ns, profile)
     iface.nav = stack or None
     description = urdf(name, profile)
     if ros_version == 1:
@@ -290,10 +290,17 @@ def _nav_odometry(iface: Interface, t: dict) -> list[tuple[str, str]]:
     return [(iface.odom_topics[-1][0], t["odom"])] if iface.odom_topics else []
 
 
-def _move_base(iface: Interface, ns: str) -> None:
-    """Add ROS 1 move_base, amcl and map_server (topics as robot_profiles common.ros1_navigation)."""
+LOCAL_PLANNERS = {"tiago": "teb_local_planner/TebLocalPlannerROS"}  # robot_profiles: TIAGo's public sim
+LOCAL_PLANNER = "dwa_local_planner/DWAPlannerROS"  # TurtleBot3's and Husky's move_base
+
+
+def _move_base(iface: Interface, ns: str, profile: ModelProfile) -> None:
+    """Add ROS 1 move_base, amcl and map_server (topics as robot_profiles common.ros1_navigation), with the local
+    planner's dynamic_reconfigure server (its max_vel_x is what a speed word changes)."""
     t = ROS1
     mb = f"{ns}/move_base"
+    plugin = LOCAL_PLANNERS.get(profile.key, LOCAL_PLANNER)
+    local = f"{mb}/{plugin.rsplit('/', 1)[-1]}"
     iface.add(
         mb,
         pubs=[
@@ -316,6 +323,14 @@ def _move_base(iface: Interface, ns: str) -> None:
             (f"{mb}/clear_costmaps", t["empty"]),
             (f"{mb}/NavfnROS/make_plan", "nav_msgs/GetPlan"),
             (f"{mb}/set_parameters", "dynamic_reconfigure/Reconfigure"),
+            (f"{local}/set_parameters", "dynamic_reconfigure/Reconfigure"),
+        ],
+    )
+    iface.add(
+        mb,
+        pubs=[
+            (f"{local}/parameter_updates", "dynamic_reconfigure/Config"),
+            (f"{local}/parameter_descriptions", "dynamic_reconfigure/ConfigDescription"),
         ],
     )
     iface.add(
@@ -333,39 +348,52 @@ def _move_base(iface: Interface, ns: str) -> None:
         pubs=[(f"{ns}/map", t["grid"]), (f"{ns}/map_metadata", "nav_msgs/MapMetaData")],
         services=[(f"{ns}/static_map", "nav_msgs/GetMap"), (f"{ns}/change_map", "nav_msgs/LoadMap")],
     )
-    iface.latched |= {f"{ns}/map", f"{ns}/amcl_pose"}
+    iface.latched |= {
+        f"{ns}/map",
+        f"{ns}/amcl_pose",
+        f"{local}/parameter_updates",
+        f"{local}/parameter_descriptions",
+    }
     iface.params.update(
         {
             f"{mb}/controller_frequency": 10.0,
             f"{mb}/planner_patience": 5.0,
             f"{mb}/base_global_planner": "navfn/NavfnROS",
+            f"{mb}/base_local_planner": plugin,
+            f"{local}/max_vel_x": profile.nav_speed,
             f"{ns}/amcl/min_particles": 500,
         }
     )
 
 
-def _nav2(iface: Interface, ns: str) -> None:
-    """Add nav2 humble: bt_navigator with navigate_to_pose, planner, controller, smoother, amcl, map_server."""
+def _nav2(iface: Interface, ns: str, profile: ModelProfile) -> None:
+    """Add nav2 humble (robot_profiles common.ros2_nav2_humble): bt_navigator with navigate_to_pose and
+    navigate_through_poses, planner, controller (its speed_limit topic), smoother, lifecycle managers (their
+    /diagnostics), amcl, map_server."""
     t = ROS2
-    act = f"{ns}/navigate_to_pose/_action"
-    iface.add(
-        f"{ns}/bt_navigator",
-        pubs=[
-            (f"{act}/feedback", "nav2_msgs/action/NavigateToPose_FeedbackMessage"),
+    pubs, services = [], []
+    for action, kind in (
+        ("navigate_to_pose", "NavigateToPose"),
+        ("navigate_through_poses", "NavigateThroughPoses"),
+    ):
+        act, typ = f"{ns}/{action}/_action", f"nav2_msgs/action/{kind}"
+        pubs += [
+            (f"{act}/feedback", f"{typ}_FeedbackMessage"),
             (f"{act}/status", "action_msgs/msg/GoalStatusArray"),
-        ],
-        subs=[(f"{ns}/goal_pose", t["pose"])],
-        services=[
-            (f"{act}/send_goal", "nav2_msgs/action/NavigateToPose_SendGoal"),
+        ]
+        services += [
+            (f"{act}/send_goal", f"{typ}_SendGoal"),
             (f"{act}/cancel_goal", "action_msgs/srv/CancelGoal"),
-            (f"{act}/get_result", "nav2_msgs/action/NavigateToPose_GetResult"),
-        ],
-    )
+            (f"{act}/get_result", f"{typ}_GetResult"),
+        ]
+    iface.add(f"{ns}/bt_navigator", pubs=pubs, subs=[(f"{ns}/goal_pose", t["pose"])], services=services)
+    for manager in ("lifecycle_manager_navigation", "lifecycle_manager_localization"):
+        iface.add(f"{ns}/{manager}", pubs=[("/diagnostics", t["diag"])])
     iface.add(f"{ns}/planner_server", pubs=[(f"{ns}/plan", "nav_msgs/msg/Path")])
     iface.add(
         f"{ns}/controller_server",
         pubs=[(f"{ns}/cmd_vel_nav", t["twist"]), (f"{ns}/local_plan", "nav_msgs/msg/Path")],
-        subs=_nav_odometry(iface, t),
+        subs=[*_nav_odometry(iface, t), (f"{ns}/speed_limit", "nav2_msgs/msg/SpeedLimit")],
     )
     iface.add(
         f"{ns}/velocity_smoother",
@@ -395,6 +423,8 @@ def _nav2(iface: Interface, ns: str) -> None:
             f"{ns}/map_server:frame_id": "map",
             f"{ns}/amcl:min_particles": 500,
             f"{ns}/bt_navigator:global_frame": "map",
+            f"{ns}/controller_server:speed_limit_topic": "speed_limit",
+            f"{ns}/controller_server:FollowPath.max_vel_x": profile.nav_speed,
         }
     )
 

@@ -32,6 +32,16 @@ class Navigator:
         self.progress = (math.inf, 0.0)
         self.replans = 0
         self.backing_until = -1.0
+        self.max_vel_x = (
+            robot.profile.nav_speed
+        )  # the local planner's top speed (dynamic_reconfigure sets it)
+        self.speed_cap: float | None = None  # m/s: nav2's speed limit (SpeedLimit), None: no limit
+
+    @property
+    def max_speed(self) -> float:
+        """The top speed the planner drives at now: its max_vel_x, or the speed limit if lower."""
+        top = self.max_vel_x if self.speed_cap is None else min(self.max_vel_x, self.speed_cap)
+        return max(0.0, top)
 
     @property
     def active(self) -> bool:
@@ -88,7 +98,7 @@ class Navigator:
         if abs(err) > 0.6:
             self.robot.drive(0.0, w)
             return
-        v = min(p.nav_speed, 0.8 * dist + 0.05) * math.cos(err)
+        v = min(self.max_speed, 0.8 * dist + 0.05) * math.cos(err)
         self.robot.drive(v, w)
 
     def _align(self, yaw: float) -> None:

@@ -10,7 +10,7 @@ from collections.abc import Callable
 
 from fleetcore.catalog import ModelProfile
 from fleetcore.world import RobotSpec
-from simworker import camera
+from simworker import camera, diagnostics
 from simworker.graph import Graph
 from simworker.interfaces import build_interface
 from simworker.physics import Physics, RobotBody
@@ -60,6 +60,7 @@ class SimRobot:
         self.iface.params[f"{self.ns}/initial_pose"] = [spec.x, spec.y, spec.yaw]
         self.odom_noise = odom_noise
         self.drift = [0.0, 0.0, 0.0]
+        self.odom_fault: str | None = None  # a test's bad odometry: "nan" (x is NaN), "jump" (1 km away)
         self.seq = 0
         self.mux_priority, self.mux_time = -1, -1e9
         self.navigator = None
@@ -75,6 +76,9 @@ class SimRobot:
             t for t, type_ in published.items() if type_.endswith("LaserScan") and t != self.iface.scan_topic
         ]
         self.scan_topics = [self.iface.scan_topic, *scans] if self.iface.scan_topic else []
+        self.diagnostics_topic = next(
+            (t for t, type_ in published.items() if type_.endswith("DiagnosticArray")), None
+        )
         self.camera_topic = next(
             (t for t, type_ in published.items() if type_.endswith("CompressedImage")), None
         )
@@ -155,8 +159,8 @@ class SimRobot:
     def publish_odometry(self, t: float) -> None:
         """Publish nav_msgs/Odometry on every odom topic someone subscribes to."""
         server = self.server
-        wanted = [(topic, tpl) for topic, tpl in self._odom_templates if topic in server.subscribers]
-        if not wanted:
+        listened = [(topic, tpl) for topic, tpl in self._odom_templates if topic in server.subscribers]
+        if not listened:
             return
         x, y, yaw = self.odom_pose()
         if self.odom_noise and self.body.vx:
@@ -164,15 +168,24 @@ class SimRobot:
             self.drift[0] += rng.gauss(0, k)
             self.drift[1] += rng.gauss(0, k)
             self.drift[2] += rng.gauss(0, k)
+        self.seq += 1  # a throttled subscriber sees gaps in it, as from a real publisher
+        wanted = [
+            (topic, tpl) for topic, tpl in listened if server.wants(topic)
+        ]  # the drift moved all the same
+        if not wanted:
+            return
         vx, vy, wz = self.body.twist()
         sec = int(t)
         stamp = (sec, int((t - sec) * 1e9))
         if self.graph.ros_version == 1:
-            self.seq += 1
             stamp = (self.seq, *stamp)
+        x += {"nan": math.nan, "jump": 1000.0}.get(self.odom_fault or "", 0.0)
         values = (*stamp, x, y, math.sin(yaw / 2), math.cos(yaw / 2), vx, vy, wz)
         for topic, tpl in wanted:
-            server.publish_text(topic, tpl % values)
+            text = tpl % values
+            if not math.isfinite(x):  # as rosbridge's json.dumps writes it: a bare NaN
+                text = text.replace("nan", "NaN")
+            server.publish_text(topic, text)
 
     def publish_scan(self, t: float) -> None:
         """Publish sensor_msgs/LaserScan on each scan topic someone subscribes to (one ray cast for all)."""
@@ -213,6 +226,14 @@ class SimRobot:
         self.server.publish_text(
             self.battery_topic, json.dumps(msg, separators=(",", ":")).replace("NaN", "null")
         )
+
+    def publish_diagnostics(self, t: float) -> None:
+        """Publish this robot's diagnostic_msgs/DiagnosticArray if someone subscribes (simworker.diagnostics)."""
+        topic = self.diagnostics_topic
+        if topic is None or topic not in self.server.subscribers:
+            return
+        message = diagnostics.array(self, self.graph.header("", t))
+        self.server.publish_text(topic, json.dumps(message, separators=(",", ":")))
 
     def publish_camera(self, t: float) -> None:
         """Publish a synthetic sensor_msgs/CompressedImage (PNG) if someone subscribes (simworker.camera)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 from simworker.graph import Graph, ServiceError
+from simworker.messages import MsgDef, Registry, base_name, registry
 
 ROSAPI_SERVICES = [
     "topics", "topics_for_type", "topics_and_raw_types", "services", "services_for_type", "nodes",
@@ -82,6 +83,7 @@ def _hidden(name: str) -> bool:
 def _handlers(g: Graph) -> dict:
     """Return the rosapi service handlers, keyed by short name."""
     v2 = g.ros_version == 2
+    types = registry(g.ros_version)
 
     def topics(_a):
         names = [t for t in g.topics() if not (v2 and _hidden(t))]
@@ -139,13 +141,25 @@ def _handlers(g: Graph) -> dict:
             "node": next((n for n, i in g.nodes.items() if _str(a, "service") in i.services), "")
         },
         "service_host": lambda _a: {"host": "localhost"},
-        "message_details": lambda a: {"typedefs": []},
-        "service_request_details": lambda a: {"typedefs": []},
-        "service_response_details": lambda a: {"typedefs": []},
+        "message_details": lambda a: {"typedefs": types.typedefs(types.message(_str(a, "type")))},
+        "service_request_details": lambda a: {"typedefs": types.typedefs(_service(types, a)[0])},
+        "service_response_details": lambda a: {"typedefs": types.typedefs(_service(types, a)[1])},
         "get_time": lambda _a: {"time": g.stamp()},
         "get_ros_version": lambda _a: {"version": 2, "distro": "humble"},
         **_param_handlers(g),
     }
+
+
+def _service(types: Registry, args: dict) -> tuple[MsgDef, MsgDef]:
+    """The request and response definitions of args' service type; the call fails for an unknown one."""
+    name = _str(args, "type")
+    parts = types.service(name)
+    if parts is None:
+        pkg, _, short = base_name(name).partition("/")
+        raise ServiceError(
+            f"Unable to import srv class {short} from package {pkg}. Caused by No module named '{pkg}'"
+        )
+    return parts
 
 
 def _str(args: dict, key: str) -> str:

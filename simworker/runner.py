@@ -7,6 +7,7 @@ import contextlib
 import signal
 from collections.abc import Callable
 
+from fleetcore import heartbeat
 from simworker.fleet import SimFleet
 
 
@@ -38,11 +39,16 @@ def serve_world(
     if not fleet.servers:
         raise ValueError(f"no endpoint of world {world!r} to serve among {', '.join(endpoints or [])}")
 
+    beating = []  # the heartbeat's task, kept while the loop runs
+
     def ready(f: SimFleet) -> None:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(ValueError, RuntimeError):  # not the main thread (e.g. a worker pool)
                 loop.add_signal_handler(sig, f.request_stop)
+        beat = heartbeat.from_env()
+        if beat is not None:  # renewed by the physics' own loop: a blocked loop is seen as hung
+            beating.append(beat.start_task())
         for key, url in f.urls.items():
             out(f"simworker: {key} ready at {url}")
 

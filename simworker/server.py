@@ -1,9 +1,15 @@
 """A rosbridge v2 WebSocket server for one simulated endpoint (asyncio + websockets).
 
-Faithful to docs/reference/rosbridge_protocol.md §2-4 and §7: the server never sends `status`,
-`png` or `fragment` ops; bad input is logged and dropped, only a failed service call answers
-(`result: false` with the error text). Every client has a bounded send queue drained by its own writer
-task, so a client that never reads loses messages (and is cut off) without slowing anyone else.
+It follows rosbridge_suite (the `ros2` and `ros1` branches of rosbridge_library) rather than the protocol text:
+published messages, service requests and client services' responses are completed with their type's defaults
+and dropped with the real server's log line when they do not fit (`simworker/messages.py`); a subscription
+with a type other than the topic's streams nothing; `compression` (png, cbor) and `fragment_size` shape what
+goes out. The server never sends `status`; bad input is logged (`[Client <uuid>] [id: <id>] <op>: <reason>`,
+at error level, as rosbridge logs it) and dropped; only a failed service call answers (`result: false` with
+the error text). Every client has a bounded send queue drained by its own writer task, so a client that never
+reads loses messages (and is cut off) without slowing anyone else (`simworker/connection.py`).
+
+Where it still differs from the real server: docs/simulator.md.
 """
 
 from __future__ import annotations
@@ -11,26 +17,21 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import time
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 
-from simworker import rosapi
+from simworker import outgoing, rosapi
+from simworker.connection import Client, Subscription
 from simworker.graph import Graph, ServiceError
+from simworker.messages import ConversionError, registry
 
 log = logging.getLogger("simworker.server")
 
 MAX_MESSAGE_SIZE = 10_000_000  # rosbridge's max_message_size; bigger frames close the connection (1009)
-SEND_QUEUE = 1000  # messages waiting for one client; older ones are dropped beyond this
-STALL_SECONDS = 5.0  # a client that accepts no data for this long is disconnected
-FLOOD_RATE = 2000.0  # publish ops per second per client before the excess is dropped
 SERVICE_TIMEOUT = 10.0  # a client-provided service that does not answer fails after this
 MAX_FRAGMENTS = 10_000
-WRITE_BATCH = 256  # frames joined into one socket write
 BRIDGE_NODE = "/rosbridge_websocket"
 
 
@@ -38,95 +39,14 @@ class BadMessage(Exception):
     """An incoming message the server drops (logged, never answered, as rosbridge does)."""
 
 
-@dataclass
-class Subscription:
-    ids: dict[str | None, tuple[int, int]] = field(
-        default_factory=dict
-    )  # id -> (throttle_rate, queue_length)
-    last_sent: float = 0.0
-    queued: int = 0
+class TypeConflict(BadMessage):
+    """rosbridge's TypeConflictException: a topic used with a type other than its own."""
 
-    @property
-    def throttle(self) -> float:
-        return min(t for t, _ in self.ids.values()) / 1000.0
-
-    @property
-    def queue_length(self) -> int:
-        return min(q for _, q in self.ids.values())
-
-
-class Client:
-    """One WebSocket connection: its subscriptions, advertisements and bounded send queue."""
-
-    def __init__(self, ws: ServerConnection) -> None:
-        self.ws = ws
-        self.queue: deque[tuple[str, Subscription | None]] = deque()
-        self.wake = asyncio.Event()
-        self.subs: dict[str, Subscription] = {}
-        self.adverts: dict[str, set] = {}
-        self.dropped = 0
-        self.tokens, self.token_time = FLOOD_RATE, time.monotonic()
-        self.connected_at = time.time()
-        self.provided: set[str] = set()  # services this client advertised
-        self.pending: dict[str, asyncio.Future] = {}  # forwarded calls awaiting its service_response
-        self.fragments: dict[str, dict[int, str]] = {}
-
-    def send(self, text: str, sub: Subscription | None = None) -> None:
-        """Queue a frame for the writer; drop the oldest when the queue is full."""
-        if sub is not None:
-            if sub.ids and (throttle := sub.throttle) and time.monotonic() - sub.last_sent < throttle:
-                return
-            if (qlen := sub.queue_length if sub.ids else 0) and sub.queued >= qlen:
-                self.dropped += 1
-                return
-            sub.last_sent = time.monotonic()
-            sub.queued += 1
-        if len(self.queue) >= SEND_QUEUE:
-            _old, old_sub = self.queue.popleft()
-            if old_sub is not None:
-                old_sub.queued -= 1
-            self.dropped += 1
-        self.queue.append((text, sub))
-        self.wake.set()
-
-    def allow(self) -> bool:
-        """Spend one token of the incoming-rate budget; False when flooding."""
-        now = time.monotonic()
-        self.tokens = min(FLOOD_RATE, self.tokens + (now - self.token_time) * FLOOD_RATE)
-        self.token_time = now
-        if self.tokens < 1:
-            return False
-        self.tokens -= 1
-        return True
-
-    async def writer(self) -> None:
-        """Send queued frames in order until the connection closes; cut off a client that stops reading."""
-        while True:
-            if not self.queue:
-                self.wake.clear()
-                await self.wake.wait()
-                continue
-            batch = []
-            while self.queue and len(batch) < WRITE_BATCH:
-                text, sub = self.queue.popleft()
-                if sub is not None:
-                    sub.queued -= 1
-                batch.append(text)
-            try:
-                async with asyncio.timeout(STALL_SECONDS):
-                    await self._write(batch)
-            except TimeoutError:
-                log.warning("client %s stopped reading; closing its connection", self.ws.remote_address)
-                self.ws.transport.abort()
-                return
-
-    async def _write(self, batch: list[str]) -> None:
-        """Write frames with one socket write: websockets' send_context pattern, frames joined."""
-        ws = self.ws
-        async with ws.send_context():
-            for text in batch:
-                ws.protocol.send_text(text.encode())
-            ws.transport.write(b"".join(ws.protocol.data_to_send()))
+    def __init__(self, topic: str, new: str, established: str) -> None:
+        super().__init__(
+            f"Tried to register topic {topic} with type {new} but it is already established with type"
+            f" {established}"
+        )
 
 
 class RosbridgeServer:
@@ -135,6 +55,7 @@ class RosbridgeServer:
     def __init__(self, key: str, graph: Graph, port: int) -> None:
         self.key = key
         self.graph = graph
+        self.types = registry(graph.ros_version)
         self.port = port
         self.clients: set[Client] = set()
         self.subscribers: dict[str, dict[Client, Subscription]] = {}
@@ -190,6 +111,12 @@ class RosbridgeServer:
         """Tell whether any client listens on topic (cheap; publishers check it first)."""
         return topic in self.subscribers
 
+    def wants(self, topic: str) -> bool:
+        """Whether a message on topic now would reach anyone: a subscriber past its throttle, or a latch
+        (periodic publishers build nothing for throttled subscribers, as rosbridge serialises nothing for them)."""
+        subs = self.subscribers.get(topic)
+        return topic in self.graph.latched_topics or (bool(subs) and any(s.due() for s in subs.values()))
+
     def publish(self, topic: str, msg: dict) -> None:
         """Publish a message dict on topic (latched topics keep it for later subscribers)."""
         if topic in self.subscribers or topic in self.graph.latched_topics:
@@ -200,8 +127,15 @@ class RosbridgeServer:
         text = f'{{"op":"publish","topic":"{topic}","msg":{msg_json}}}'
         if topic in self.graph.latched_topics:
             self.latched[topic] = text
+        encoded: dict[str, str | bytes] = {"none": text}
         for client, sub in self.subscribers.get(topic, {}).items():
-            client.send(text, sub)
+            if (how := sub.compression) not in encoded:
+                encoded[how] = outgoing.compress(how, topic, msg_json, self.types, self._definition(topic))
+            client.send(encoded[how], sub)
+
+    def _definition(self, topic: str):
+        """The message definition of a topic's type, None where the simulator does not know it."""
+        return self.types.message(self.graph.topic_types.get(topic, ""))
 
     def add_action(self, name: str, type_: str, handler: Callable) -> None:
         """Serve a ROS 2 action through send_action_goal: handler(goal) is called with an ActionGoal."""
@@ -247,35 +181,46 @@ class RosbridgeServer:
         self.publish("/connected_clients", {"clients": clients})
 
     def dispatch(self, client: Client, raw: str | bytes) -> None:
-        """Decode one frame and run its op; anything wrong is logged and dropped."""
+        """Decode one frame and run its op; anything wrong is logged (as rosbridge's protocol logs it)."""
         try:
-            if isinstance(raw, bytes):
-                raw = raw.decode("utf-8")
-            msg = json.loads(raw)
-            if not isinstance(msg, dict):
-                raise BadMessage("message is not a JSON object")
-            op = msg.get("op")
-            handler = self.ops.get(op) if isinstance(op, str) else None
-            if handler is None:
-                raise BadMessage(f"Unknown operation: {op}.  Allowed operations: {sorted(self.ops)}")
-            if op == "publish" and not client.allow():
-                client.dropped += 1  # a publish flood: the excess is dropped
-                return
+            msg = json.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
+        except (ValueError, UnicodeDecodeError) as exc:  # rosbridge drops undecodable input silently
+            log.debug("%s: undecodable message dropped: %s", self.key, exc)
+            return
+        if not isinstance(msg, dict):
+            return
+        mid = msg.get("id")
+        op = msg.get("op")
+        if "op" not in msg:
+            allowed = list(self.ops)
+            return self._log(client, f"Received a message without an op.  All messages require 'op' field"
+                             f" with value one of: {allowed}.  Original message was: {raw}", mid)  # fmt: skip
+        handler = self.ops.get(op) if isinstance(op, str) else None
+        if handler is None:
+            return self._log(client, f"Unknown operation: {op}.  Allowed operations: {list(self.ops)}", mid)
+        if "fragment_size" in msg:  # rosbridge keeps it for everything it sends this client from now on
+            client.fragment_size = msg["fragment_size"] if isinstance(msg["fragment_size"], int) else None
+        if op == "publish" and not client.allow():
+            client.dropped += 1  # a publish flood: the excess is dropped
+            return
+        try:
             handler(client, msg)
-        except (BadMessage, ValueError, UnicodeDecodeError) as exc:
-            log.info("%s: dropped message: %s", self.key, exc)
+        except (BadMessage, ConversionError, ServiceError) as exc:
+            self._log(client, f"{op}: {exc}", mid)
         except Exception:  # a bug in a handler must not take the endpoint down
             log.exception("%s: error handling message", self.key)
+
+    def _log(self, client: Client, text: str, mid=None) -> None:
+        """Log at error level as rosbridge's Protocol.log does: `[Client <id>] [id: <mid>] <text>`."""
+        prefix = f"[Client {client.id}]" if mid is None else f"[Client {client.id}] [id: {mid}]"
+        log.error("%s %s", prefix, text)
 
     # ----- ops -----
     def _advertise(self, client: Client, msg: dict) -> None:
         topic, type_ = _name(msg, "topic"), _field(msg, "type", str)
         known = self.graph.topic_types.get(topic)
         if known and _norm(known) != _norm(type_):
-            raise BadMessage(
-                f"advertise: Tried to register topic {topic} with type {type_} but it is already"
-                f" established with type {known}"
-            )
+            raise TypeConflict(topic, self.types.type_name(type_), known)
         client.adverts.setdefault(topic, set()).add(msg.get("id"))
         self.graph.add_publisher(BRIDGE_NODE, topic, known or self.graph.msg_type(type_))
         if _field(msg, "latch", bool, required=False):
@@ -296,14 +241,16 @@ class RosbridgeServer:
             self.graph.node(BRIDGE_NODE).pubs.discard(topic)
 
     def _publish(self, client: Client, msg: dict) -> None:
+        """Publish a client's message completed with its type's defaults; one that does not fit is dropped."""
         topic = _name(msg, "topic")
         body = msg.get("msg", {})
-        if not isinstance(body, dict):
-            raise BadMessage(f"publish: Expected field msg to be an object. Invalid value: {body!r}")
         if topic not in self.graph.topic_types:
-            raise BadMessage(
-                f"publish: Cannot infer topic type for topic {topic} as it is not yet advertised"
-            )
+            raise BadMessage(f"Cannot infer topic type for topic {topic} as it is not yet advertised")
+        definition = self._definition(topic)
+        if definition is not None:
+            body = self.types.populate(definition, body)
+        elif not isinstance(body, dict):
+            raise BadMessage(f"Expected a JSON object for type {self.graph.topic_types[topic]}")
         if topic not in client.adverts:
             client.adverts[topic] = {None}
             self.graph.add_publisher(BRIDGE_NODE, topic, self.graph.topic_types[topic])
@@ -320,13 +267,19 @@ class RosbridgeServer:
         type_ = _field(msg, "type", str, required=False)
         throttle = _field(msg, "throttle_rate", int, required=False) or 0
         qlen = _field(msg, "queue_length", int, required=False) or 0
-        if topic not in self.graph.topic_types:
+        _field(msg, "fragment_size", int, required=False)
+        compression = _field(msg, "compression", str, required=False) or "none"
+        known = self.graph.topic_types.get(topic)
+        if known is None:
             if not type_:
-                raise BadMessage(f"subscribe: Cannot subscribe to {topic}: type not known")
+                raise BadMessage(f"Cannot infer topic type for topic {topic} as it is not yet advertised")
             self.graph.topic_types[topic] = self.graph.msg_type(type_)
+        elif type_ and _norm(type_) != _norm(known):  # the real server subscribes nothing: nothing streams
+            raise TypeConflict(topic, self.types.type_name(type_), known)
         self.graph.node(BRIDGE_NODE).subs.add(topic)
         sub = client.subs.setdefault(topic, Subscription())
         sub.ids[msg.get("id")] = (max(throttle, 0), max(qlen, 0))
+        sub.compressions[msg.get("id")] = compression
         self.subscribers.setdefault(topic, {})[client] = sub
         if topic in self.latched:
             client.send(self.latched[topic])
@@ -337,11 +290,13 @@ class RosbridgeServer:
         if sub is None:
             return
         sub.ids.pop(msg.get("id"), None)
+        sub.compressions.pop(msg.get("id"), None)
         if not sub.ids or "id" not in msg:
             self._remove_sub(client, topic)
 
     def _remove_sub(self, client: Client, topic: str) -> None:
-        client.subs.pop(topic, None)
+        if (sub := client.subs.pop(topic, None)) is not None:
+            sub.end()
         subs = self.subscribers.get(topic, {})
         subs.pop(client, None)
         if not subs:
@@ -349,29 +304,21 @@ class RosbridgeServer:
             self.graph.node(BRIDGE_NODE).subs.discard(topic)
 
     def _call_service(self, client: Client, msg: dict) -> None:
+        """Call a service with the request completed from args (a dict, or a list: positional) as
+        rosbridge's call_service does; a request that does not fit fails the call, logged and answered."""
         service = _name(msg, "service")
+        _field(msg, "fragment_size", (int, type(None)), required=False)
+        _field(msg, "compression", str, required=False)
         call_id = msg.get("id")
         if "#" in service and call_id is None:
             service, call_id = service.split("#", 1)
-        args = msg.get("args", [])
-        if args == []:
-            args = {}
-        if not isinstance(args, (dict, list)):
-            raise BadMessage(
-                f"call_service: Expected field args to be one of (list, dict). Invalid value: {args!r}"
-            )
         reply = {"op": "service_response", "service": service}
         if call_id is not None:
             reply["id"] = call_id
-        handler = self.graph.service_handlers.get(service)
         try:
-            if handler is None:
-                raise ServiceError(f"Service {service} does not exist")
-            if isinstance(args, list):
-                raise ServiceError(f"{service}: positional args are not supported by this simulator")
-            values = handler(args)
-        except ServiceError as exc:
-            client.send(json.dumps({**reply, "values": str(exc), "result": False}))
+            values = self._serve(service, msg.get("args", []))
+        except (ServiceError, ConversionError) as exc:
+            self._call_failed(client, reply, exc)
             return
         if isinstance(values, asyncio.Future):
             task = asyncio.ensure_future(self._finish_call(client, reply, values))
@@ -379,6 +326,35 @@ class RosbridgeServer:
             task.add_done_callback(self._tasks.discard)
             return
         client.send(json.dumps({**reply, "values": values, "result": True}))
+
+    def _serve(self, service: str, args):
+        """The handler's answer to args read as the service type's request (rosbridge's
+        args_to_service_request_instance); raise ServiceError or ConversionError where the call fails."""
+        handler = self.graph.service_handlers.get(service)
+        if handler is None:
+            raise ServiceError(f"Service {service} does not exist")
+        parts = self.types.service(self.graph.service_types.get(service, ""))
+        if parts is None:  # a type the simulator does not know: args passed on as sent
+            return handler(args if isinstance(args, dict) else {})
+        request, response = parts
+        if isinstance(args, list):
+            args = dict(zip((f.name for f in request.fields), args, strict=False))
+        values = handler(self.types.populate(request, args if isinstance(args, dict) else {}))
+        if isinstance(values, asyncio.Future):
+            return values
+        try:
+            return self.types.populate(response, values)
+        except ConversionError as exc:  # the simulator's own answer does not fit: its bug, said loudly
+            log.warning("%s: %s answered a %s that does not fit: %s", self.key, service, response.name, exc)
+            return values
+
+    def _call_failed(self, client: Client, reply: dict, exc: Exception) -> None:
+        """rosbridge's CallService._failure: log the exception, answer result false with its text."""
+        kind = getattr(exc, "kind", None) or (
+            "InvalidServiceException" if str(exc).endswith("does not exist") else type(exc).__name__
+        )
+        self._log(client, f"call_service {kind}: {exc}", reply.get("id"))
+        client.send(json.dumps({**reply, "values": str(exc), "result": False}))
 
     async def _finish_call(self, client: Client, reply: dict, pending: asyncio.Future) -> None:
         """Relay the answer of a client-provided service (or its failure) to the caller."""
@@ -418,16 +394,22 @@ class RosbridgeServer:
         self.graph.service_handlers.pop(service, None)
 
     def _service_response(self, client: Client, msg: dict) -> None:
-        _field(msg, "service", str)
-        ok = _field(msg, "result", bool)
-        future = client.pending.pop(str(msg.get("id")), None)
-        if future is None or future.done():
-            raise BadMessage(f"service_response: no pending request with id {msg.get('id')}")
-        values = msg.get("values", {})
-        if ok:
-            future.set_result(values if isinstance(values, dict) else {})
-        else:
-            future.set_exception(ServiceError(str(values)))
+        """A client's answer to a call forwarded to its service. As rosbridge's ServiceResponse, `result` must
+        be a bool but is not read: the values, completed as the response type, are the answer."""
+        service = _name(msg, "service")
+        _field(msg, "id", str, required=False)
+        _field(msg, "values", dict, required=False)
+        _field(msg, "result", bool)
+        if service not in client.provided:
+            raise BadMessage(f"Service {service} has not been advertised via rosbridge.")
+        for key in ("id", "values"):
+            if key not in msg:
+                raise BadMessage(repr(key))  # rosbridge's KeyError, logged as such
+        parts = self.types.service(self.graph.service_types.get(service, ""))
+        values = self.types.populate(parts[1], msg["values"]) if parts else msg["values"]
+        future = client.pending.pop(msg["id"], None)
+        if future is not None and not future.done():
+            future.set_result(values)
 
     def _fragment(self, client: Client, msg: dict) -> None:
         """Reassemble a fragmented message and dispatch it once all parts arrived."""
@@ -438,7 +420,7 @@ class RosbridgeServer:
             _field(msg, "total", (int, float)),
         )
         if not 0 <= num < total <= MAX_FRAGMENTS:
-            raise BadMessage(f"fragment: bad num/total {num}/{total}")
+            raise BadMessage(f"bad num/total {num}/{total}")
         parts = client.fragments.setdefault(frag_id, {})
         parts[num] = data
         if len(parts) >= int(total):
@@ -451,7 +433,7 @@ class RosbridgeServer:
         goal_id = str(msg.get("id") or f"send_action_goal:{action}:{len(self.goals)}")
         args = msg.get("args", {})
         if not isinstance(args, dict):
-            raise BadMessage(f"send_action_goal: Expected field args to be a dict. Invalid value: {args!r}")
+            raise BadMessage(f"Expected field args to be a dict. Invalid value: {args!r}")
         goal = ActionGoal(self, client, action, goal_id, bool(msg.get("feedback", False)))
         if action not in self.actions:
             goal.finish(f"Action {action} does not exist", status=0, ok=False)
@@ -505,19 +487,16 @@ class ActionGoal:
             self.on_cancel()
 
 
-def _field(msg: dict, name: str, type_: type, required: bool = True):
-    """Return msg[name] checked against type_, as rosbridge's basic_type_check does."""
-    if name not in msg or msg[name] is None:
+def _field(msg: dict, name: str, type_: type | tuple, required: bool = True):
+    """Return msg[name] checked against type_ as rosbridge's Capability.basic_type_check checks it."""
+    if name not in msg:
         if required:
-            raise BadMessage(f"{msg.get('op')}: Expected a {name} field but none was found.")
+            raise BadMessage(f"Expected a {name} field but none was found.")
         return None
     value = msg[name]
     types = type_ if isinstance(type_, tuple) else (type_,)
-    if not isinstance(value, types) or (bool not in types and isinstance(value, bool)):
-        names = ", ".join(t.__name__ for t in types)
-        raise BadMessage(
-            f"{msg.get('op')}: Expected field {name} to be one of ({names}). Invalid value: {value!r}"[:300]
-        )
+    if not isinstance(value, types):
+        raise BadMessage(f"Expected field {name} to be one of {types}. Invalid value: {value}")
     return value
 
 

@@ -43,6 +43,11 @@ def send_home(fleet: SimFleet, names: Iterable[str]) -> None:
         fleet.physics.space.reindex_shapes_for_body(body)
 
 
+def bad_odometry(fleet: SimFleet, name: str, fault: str | None) -> None:
+    """Make a robot publish bad odometry ("nan": x is NaN, "jump": 1 km off), or good again with None."""
+    fleet.robots[name].odom_fault = fault
+
+
 def contact_count(fleet: SimFleet) -> int:
     """Robot-robot contacts the physics has counted so far."""
     return len(fleet.physics.contacts)
@@ -135,7 +140,9 @@ def running_world(
 
 
 # What the world process answers: request name -> fn(fleet, *args), run on the fleet's loop.
-REQUESTS = {"pose": SimFleet.pose, "contacts": contact_count, "touched": touched, "home": send_home}
+REQUESTS = {
+    "pose": SimFleet.pose, "contacts": contact_count, "touched": touched, "home": send_home, "odometry": bad_odometry,
+}  # fmt: skip
 
 
 class WorldProcess:

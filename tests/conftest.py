@@ -8,6 +8,26 @@ from access.roles import ADMIN, OPERATOR, VIEWER, sync_groups
 PASSWORD = "correct-horse-battery"
 
 
+def pytest_configure(config):
+    """A stop socket of this run's own (none listens unless a test starts one): a `make run` on this checkout's
+    var folder never gets the tests' stops. Under pytest-xdist each worker has its own database (pytest-django
+    suffixes it) and so its own robot ids: its Redis keys, channel groups and robot locks get its own prefix too,
+    for it and for the processes its tests start."""
+    import os
+
+    from django.conf import settings
+
+    settings.FLEET_STOP_SOCKET = f"/tmp/fleet-test-{os.getpid()}-stop.sock"
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker:
+        prefix = f"{settings.CACHES['default'].get('KEY_PREFIX') or 'fleet'}-{worker}"
+        settings.CACHES["default"]["KEY_PREFIX"] = prefix
+        settings.CHANNEL_LAYERS["default"]["CONFIG"]["prefix"] = f"{prefix}:asgi"
+        settings.FLEET_EXEC_KEY_PREFIX = f"{settings.FLEET_EXEC_KEY_PREFIX}-{worker}"
+        os.environ["FLEET_REDIS_PREFIX"] = prefix
+        os.environ["FLEET_EXEC_KEY_PREFIX"] = settings.FLEET_EXEC_KEY_PREFIX
+
+
 @pytest.fixture(scope="session")
 def django_db_setup(django_db_setup, django_db_blocker):
     """pytest-django's test database, whose drop at the end is not refused for sessions other threads still hold.

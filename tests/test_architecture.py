@@ -1,12 +1,15 @@
 """The layers of docs/ARCHITECTURE.md hold: import-linter's contracts (pyproject.toml) pass on the code, fail on
-a wrong-way import, and the plain library imports with Django and Celery unavailable."""
+a wrong-way import, and the plain library imports with Django and Celery unavailable; no module is in an import
+cycle, inside a package or across packages, with the imports deferred into functions counted."""
 
+import ast
 import pkgutil
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import grimp
 import pytest
 
 import fleetcore
@@ -82,3 +85,81 @@ def test_the_plain_library_imports_without_django_or_celery():
     )
     assert result.returncode == 0, result.stderr
     assert int(result.stdout) >= len(modules) > 5
+
+
+def module_cycles(*packages: str) -> list[list[str]]:
+    """The import cycles between the modules of these packages, each as its modules (a strongly connected
+    component of the import graph, Tarjan's). grimp reads every import statement: at the top, deferred into a
+    function, under TYPE_CHECKING; an import by dotted path (import_string) is no statement and none is used."""
+    graph = grimp.build_graph(*packages, cache_dir=None)
+    edges = {module: graph.find_modules_directly_imported_by(module) for module in graph.modules}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles = []
+
+    def visit(module: str) -> None:  # (recursive: the graph is some hundreds of modules deep at most)
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for imported in edges[module]:
+            if imported not in index:
+                visit(imported)
+                low[module] = min(low[module], low[imported])
+            elif imported in stack:
+                low[module] = min(low[module], index[imported])
+        if low[module] == index[module]:
+            component = [stack.pop()]
+            while component[-1] != module:
+                component.append(stack.pop())
+            if len(component) > 1 or module in edges[module]:
+                cycles.append(sorted(component))
+
+    for module in sorted(edges):
+        if module not in index:
+            visit(module)
+    return cycles
+
+
+def test_no_module_is_in_an_import_cycle():
+    assert module_cycles(*PACKAGES) == []
+
+
+def test_a_cycle_through_an_import_deferred_into_a_function_is_found(tmp_path, monkeypatch):
+    """The checker on a tiny package: a imports b at the top, b imports a inside a function; c stands apart."""
+    package = tmp_path / "planted"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "a.py").write_text("from planted import b\n")
+    (package / "b.py").write_text("def later():\n    from planted import a\n\n    return a\n")
+    (package / "c.py").write_text("from planted import a\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert module_cycles("planted") == [["planted.a", "planted.b"]]
+    (package / "b.py").write_text("def later():\n    return 1\n")
+    assert module_cycles("planted") == []
+
+
+INTERPRETATION_KEYS = {"type", "valid", "needs_user", "question"}  # what only an interpretation's dict has
+
+
+def hand_built_interpretations(root: Path, packages: list[str]) -> list[str]:
+    """Where product code writes an interpretation as a dict literal ({"type": ..., "steps": [...]}) instead of
+    `fleetcore.interpretation.Interpretation` (its own `to_dict` excepted): "path:line" each."""
+    found = []
+    for package in packages:
+        for path in sorted((root / package).rglob("*.py")):
+            if "migrations" in path.parts or path.name == "interpretation.py":
+                continue
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                keys = {k.value for k in getattr(node, "keys", ()) if isinstance(k, ast.Constant)}
+                if isinstance(node, ast.Dict) and "steps" in keys and keys & INTERPRETATION_KEYS:
+                    found.append(f"{path.relative_to(root)}:{node.lineno}")
+    return found
+
+
+def test_no_interpretation_is_built_by_hand(tmp_path):
+    assert hand_built_interpretations(ROOT, PACKAGES) == []
+    (tmp_path / "planted").mkdir()
+    (tmp_path / "planted" / "make_way.py").write_text(
+        'parse = {"type": "I", "steps": [{"action": "stop"}]}\n'
+    )
+    assert hand_built_interpretations(tmp_path, ["planted"]) == ["planted/make_way.py:1"]

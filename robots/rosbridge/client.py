@@ -32,6 +32,7 @@ from robots.rosbridge.errors import (
     ServiceError,
     UnreachableError,
 )
+from robots.rosbridge.inflow import Inflow
 
 log = logging.getLogger("robots.rosbridge")
 STABLE = 2.0  # s: a connection that lasted less is a flap, and the next attempt waits out the backoff
@@ -111,6 +112,7 @@ class RosbridgeClient:
         self._adverts: dict[str, dict] = {}
         self._fragments = codec.Fragments(self.max_frame_bytes)
         self._dropped = 0
+        self.inflow = Inflow(url, limits.current().frames_per_s)  # frames beyond its rate are dropped unread
         self._link_callbacks: list[Callable[[bool, str], None]] = []
         self._up: bool | None = None
         self._garbage: NotRosbridgeError | None = None
@@ -256,6 +258,8 @@ class RosbridgeClient:
         reason, error_type = "connection closed", LinkDown
         try:
             async for raw in ws:
+                if not self.inflow.admit():
+                    continue  # a flood: dropped unread, counted, said (robots.rosbridge.inflow)
                 try:
                     self._dispatch(raw)
                 except NotRosbridgeError as exc:

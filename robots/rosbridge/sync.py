@@ -94,9 +94,6 @@ class SyncClient:
     def send_action_goal(self, action: str, action_type: str, goal: dict, on_feedback=None):
         return self._run(self.client.send_action_goal(action, action_type, goal, on_feedback))
 
-    def wait_action(self, goal, timeout: float | None = None) -> dict:
-        return self._run(goal.wait(timeout))
-
     def cancel_action_goal(self, goal) -> None:
         self._run(self.client.cancel_action_goal(goal))
 

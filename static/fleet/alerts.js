@@ -52,6 +52,8 @@ function showInTable(alert) {
   else body.prepend(row(alert));
 }
 
+const seenKinds = new Map(); // alert id -> the kind this page last showed
+
 function open() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
   const socket = new WebSocket(`${scheme}://${location.host}/ws/alerts/`);
@@ -63,7 +65,10 @@ function open() {
     if (message.type !== "alert.update") return;
     const alert = message.alert;
     showInTable(alert);
-    if (alert.status === "open" && alert.count === 1) toast(`${alert.kind_label}: ${alert.message}`, alert.severity !== "info");
+    // a toast for news: a new alert, or one whose event took a turn (a stall that ended in a failure: one alert)
+    const turned = seenKinds.has(alert.id) && seenKinds.get(alert.id) !== alert.kind;
+    seenKinds.set(alert.id, alert.kind);
+    if (alert.status === "open" && (alert.count === 1 || turned)) toast(`${alert.kind_label}: ${alert.message}`, alert.severity !== "info");
   });
   socket.addEventListener("close", (event) => {
     if (event.code === 4401 || event.code === 4403) return;

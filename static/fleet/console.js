@@ -1,13 +1,28 @@
 // The instruction console: type, see the parse, answer the interpreter's question in place, watch progress.
-import { request, toast } from "./api.js";
+import { canControl, request, toast } from "./api.js";
+import { cancelInstruction } from "./tasklist.js";
 
-const UNITS = { move_by: " m", turn_by: "°", wait: " s" };
+const OPEN = ["received", "queued", "running", "needs_user"]; // an instruction that can still be cancelled
 
-// A subject chosen by kind: {"any": true, "model": "turtlebot"} -> "any turtlebot", {"all": true, "except": [...]}.
+function cancelButton(id) {
+  const b = document.createElement("button");
+  b.type = "button";
+  b.className = "small";
+  b.textContent = "Cancel";
+  b.setAttribute("aria-label", `Cancel #${id}`);
+  b.addEventListener("click", () => cancelInstruction(id));
+  return b;
+}
+
+// The robots of a step in words: names; "all" -> "every robot"; none named ("any") -> "a robot the portal
+// chooses" (its answer says whom and why); a subject chosen by kind: {"any": true, "model": "turtlebot"} ->
+// "a turtlebot the portal chooses", {"all": true, "except": ["husky"]} -> "every robot except husky".
 function robotsInWords(robots) {
-  if (!robots || typeof robots !== "object") return robots;
-  const words = [robots.all ? "all" : "any"];
-  if (robots.model) words.push(robots.model);
+  if (Array.isArray(robots) && robots.length) return robots.join(", ");
+  if (robots === "all") return "every robot";
+  if (!robots || typeof robots !== "object") return "a robot the portal chooses";
+  const kind = robots.model || "robot";
+  const words = [robots.all ? `every ${kind}` : `a ${kind} the portal chooses`];
   if (robots.except) words.push(`except ${robots.except.join(", ")}`);
   return words.join(" ");
 }
@@ -82,13 +97,10 @@ export class Console {
     box.append(head);
     const steps = document.createElement("ul");
     steps.className = "steps";
-    (parse.steps || []).forEach((step) => {
+    // Each step in the interpreter's words (interpreter/forms.py read_back): "rotate tiago 3 times".
+    (parse.steps || []).forEach((step, index) => {
       const li = document.createElement("li");
-      const robots = Array.isArray(step.robots) ? step.robots.join(", ") : robotsInWords(step.robots);
-      const amount = step.amount != null ? ` ${step.amount}${UNITS[step.action] || ""}` : "";
-      const loop = step.span ? ` the ${step.span} step(s) before, until stopped` : "";
-      const where = step.destination ? ` to ${step.destination.name || ""}${step.destination.x != null ? ` (${step.destination.x}, ${step.destination.y})` : ""}` : "";
-      li.textContent = `${step.action || "?"} ${robots || ""}${amount}${loop}${where}${step.task ? ` then ${step.task}` : ""}${step.speed ? `, ${step.speed}` : ""}`;
+      li.textContent = (parse.read_back || [])[index] || `${step.action || "?"} ${robotsInWords(step.robots)}`;
       steps.append(li);
     });
     box.append(steps);
@@ -164,18 +176,35 @@ export class Console {
     badge.textContent = status;
     li.append(badge);
     if (outcome) li.append(` ${outcome}`);
+    if (OPEN.includes(status) && canControl()) li.append(" ", cancelButton(id)); // the task list's cancel, here too
     const parseBadge = document.querySelector(`#parse-${id} .badge`);
     if (parseBadge) { parseBadge.textContent = status; parseBadge.className = `badge status-${status}`; }
   }
 
   instructionUpdate(message) {
+    if (message.expired) { this.expire(message); return; }
     this.line(message.id, `#${message.id} ${message.text}`, message.status, message.outcome);
+  }
+
+  // A question nobody answered in time (execution/sweeps.py): gone from Progress with its robots' lines; its
+  // answer box, if still shown, gives way to the note ("expired: no answer within 10 min").
+  expire(message) {
+    this.progress.querySelectorAll(`li[data-instruction="${message.id}"], li[data-of="${message.id}"]`).forEach((li) => li.remove());
+    const question = document.querySelector(`#parse-${message.id} .question`);
+    if (!question) return;
+    const note = document.createElement("p");
+    note.className = "muted";
+    note.textContent = message.outcome;
+    question.replaceWith(note);
+    const badge = document.querySelector(`#parse-${message.id} .badge`);
+    if (badge) { badge.textContent = "expired"; badge.className = `badge status-${message.status}`; }
   }
 
   transition(message) {
     if (!message.instruction) return;
     const li = document.createElement("li");
     li.className = "muted";
+    li.dataset.of = String(message.instruction);
     li.textContent = `${new Date(message.at).toLocaleTimeString()} ${message.robot}: ${message.from_state} → ${message.to_state}${message.reason ? ` (${message.reason})` : ""}`;
     const owner = this.progress.querySelector(`li[data-instruction="${message.instruction}"]`);
     if (owner) owner.after(li); else this.progress.prepend(li);

@@ -4,9 +4,11 @@ import { canControl, request, toast } from "./api.js";
 import { Console } from "./console.js";
 import { connectLive } from "./live.js";
 import { FleetMap } from "./map.js";
-import { RobotTable } from "./robots_table.js";
+import { poseAge, poseTrouble, RobotTable, serverTime, STALE_S } from "./robots_table.js";
+import { TaskList } from "./tasklist.js";
 
 const table = new RobotTable(document.querySelector("#robot-table tbody"));
+const tasks = new TaskList(document.getElementById("tasklist"));
 const mapData = document.getElementById("map-data") ? JSON.parse(document.getElementById("map-data").textContent) : null;
 const canvas = document.getElementById("fleet-map");
 const console_ = new Console(document.getElementById("console-form"), document.getElementById("parse"), document.getElementById("progress") || document.createElement("ol"));
@@ -48,11 +50,14 @@ document.querySelectorAll("button.goto").forEach((button) => button.addEventList
 
 console_.live = connectLive("/ws/fleet/", {
   snapshot(message) {
+    serverTime(message.server_time);
     table.load(message.robots);
     if (map) map.setRobots(message.robots);
+    tasks.load(message.queues);
   },
+  "robot.queue"(message) { tasks.update(message); },
   "robot.status"(message) {
-    const changes = { state: message.state, link_status: message.link_status, last_seen: message.last_seen };
+    const changes = { state: message.state, link_status: message.link_status, last_seen: message.last_seen, stop_hold: message.stop_hold };
     if (!table.update(message.id, changes)) table.load([...table.robots.values(), { id: message.id, name: message.robot, ...changes }]);
     if (map) map.update(message.id, changes);
   },
@@ -85,11 +90,37 @@ console_.live = connectLive("/ws/fleet/", {
     message.poses.forEach((pose) => {
       table.speed(pose.id, pose);
       if (map) map.pose(pose);
+      tasks.pose(pose);
     });
   },
   "command.result"(message) { toast(message.detail, !message.ok); },
 });
 
-setInterval(() => table.tick(), 2000); // "last seen" ages
+// The whole fleet stale: no robot's pose is fresher than STALE_S (the links process frozen or gone, say). Only a
+// clock in the browser can tell: nothing comes from a process that is stuck.
+const staleBanner = document.createElement("p");
+staleBanner.id = "fleet-stale";
+staleBanner.className = "banner warning";
+staleBanner.setAttribute("role", "status");
+staleBanner.hidden = true;
+(canvas || document.getElementById("robot-table")).before(staleBanner);
 
-window.fleet = { map, table, console: console_ }; // for the browser tests and the curious
+function fleetStale() {
+  const ages = [...table.robots.values()].filter((robot) => robot.link_status !== "offline").map(poseAge).filter((age) => age != null);
+  const freshest = ages.length ? Math.min(...ages) : null;
+  const stale = freshest != null && freshest > STALE_S;
+  staleBanner.hidden = !stale;
+  if (stale) staleBanner.textContent = `Fleet stale: no robot's pose has come for ${freshest.toFixed(1)} s; the map and the table show where they last were.`;
+  document.body.dataset.fleetStale = stale ? "1" : "";
+}
+
+let troubles = "";
+setInterval(() => {
+  table.tick(); // "last seen" ages, a stale pose says so
+  fleetStale();
+  const now = [...table.robots.values()].map((robot) => poseTrouble(robot).replace(/\(.*\)/, "")).join("|");
+  if (map && (now !== troubles || now.includes("stale"))) map.redraw(); // stale labels show their age
+  troubles = now;
+}, 500);
+
+window.fleet = { map, table, console: console_, tasks }; // for the browser tests and the curious

@@ -19,17 +19,21 @@ export function connectLive(path, handlers) {
     socket = new WebSocket(`${scheme}://${location.host}${path}`);
     socket.addEventListener("open", () => {
       delay = 500;
-      status("live", "live");
+      status("syncing", "syncing"); // "live" once the snapshot is shown: before it the page shows old state
       while (pending.length) socket.send(pending.shift());
     });
     socket.addEventListener("message", (event) => {
-      const message = JSON.parse(event.data);
+      // one message that cannot be read or handled costs itself only, never the page's later messages
+      let message;
+      try { message = JSON.parse(event.data); } catch (error) { console.error("live: unreadable message dropped", error); return; }
+      if (!message || typeof message !== "object") return;
       if (message.type === "command.result" && waiting.has(message.ref)) {
         waiting.get(message.ref)(message);
         waiting.delete(message.ref);
       }
       const handler = handlers[message.type];
-      if (handler) handler(message);
+      try { if (handler) handler(message); } catch (error) { console.error(`live: ${message.type} not handled`, error); }
+      if (message.type === "snapshot") status("live", "live");
     });
     socket.addEventListener("close", (event) => {
       if (event.code === 4401) { location.href = `/login/?next=${encodeURIComponent(location.pathname)}`; return; }

@@ -3,7 +3,9 @@
 import { STATE_GLYPH, request, toast } from "./api.js";
 import { connectLive } from "./live.js";
 import { FleetMap } from "./map.js";
-import { IDLE, shownState, telemetry } from "./robots_table.js";
+import { TaskList } from "./tasklist.js";
+import { Diagnostics, Inspector } from "./telemetry.js";
+import { IDLE, mergePose, placed, poseTrouble, serverTime, shownState, telemetry } from "./robots_table.js";
 
 const panel = document.getElementById("control");
 const robotId = Number(panel.dataset.robotId);
@@ -38,10 +40,21 @@ function showHolder(name, until) {
   pad.refresh();
 }
 
+// A person's stop holds the robot: nothing automatic moves it until released (the button, "release <name>").
+function showStopHold(words) {
+  robot.stop_hold = words || null;
+  const box = document.getElementById("stop-hold");
+  box.hidden = !words;
+  document.getElementById("stop-hold-words").textContent = words ? `‖ ${words}` : "";
+}
+
 function showTelemetry() {
   const pose = robot.pose;
-  if (pose) {
-    document.getElementById("pose").textContent = `x ${pose.x.toFixed(2)} m, y ${pose.y.toFixed(2)} m, heading ${pose.yaw.toFixed(2)} rad`;
+  const trouble = poseTrouble(robot);
+  if (placed(pose)) {
+    document.getElementById("pose").textContent = `x ${pose.x.toFixed(2)} m, y ${pose.y.toFixed(2)} m, heading ${(pose.yaw || 0).toFixed(2)} rad${trouble ? ` (${trouble})` : ""}`;
+  } else if (trouble) {
+    document.getElementById("pose").textContent = trouble;
   }
   document.getElementById("t-speed").textContent = pose ? `${telemetry.speed(robot)}, turning ${Math.abs(pose.w || 0).toFixed(2)} rad/s` : "–";
   if (pose && pose.battery != null) document.getElementById("t-battery").textContent = telemetry.battery(robot);
@@ -53,7 +66,7 @@ function showDoing(reason) {
   const instruction = robot.instruction;
   const step = telemetry.step(robot);
   const parts = instruction ? [`#${instruction.id} ${instruction.text}`, step, reason].filter(Boolean) : [reason || "nothing"];
-  if (robot.waitingFor) parts.push(`⏸ waiting for ${robot.waitingFor}`);
+  if (robot.waitingFor) parts.push(`‖ waiting for ${robot.waitingFor}`);
   document.getElementById("t-step").textContent = parts.join(" · ");
 }
 
@@ -66,6 +79,15 @@ function addTransition(record) {
 }
 
 // Small live plots (uPlot, vendored in static/vendor/uplot): speed and battery over the last two minutes.
+// The time axis always spans those two minutes (ending at the newest point), ticked at whole 15 s, 30 s or
+// minutes as the width allows and labelled hh:mm:ss: never every 0.5 s of the first few seconds' points.
+const TICK_S = [15, 30, 60, 120, 300];
+const timeWindow = (u, min, max) => [(max ?? Date.now() / 1000) - PLOT_S, max ?? Date.now() / 1000];
+const TIME_AXIS = {
+  space: 70, // px between ticks at least: uPlot picks the first of TICK_S that leaves this much room
+  incrs: TICK_S,
+  values: (u, ticks) => ticks.map((t) => new Date(t * 1000).toLocaleTimeString([], { hour12: false })),
+};
 const plots = (() => {
   if (!window.uPlot) return null;
   const series = { t: [], speed: [], battery: [] };
@@ -74,8 +96,8 @@ const plots = (() => {
     if (!box) return null;
     const options = {
       width: Math.max(200, box.clientWidth), height: 120, legend: { show: true },
-      scales: { x: { time: true }, y: range ? { range } : {} },
-      axes: [{}, { label: unit, size: 50 }],
+      scales: { x: { time: true, range: timeWindow }, y: range ? { range } : {} },
+      axes: [TIME_AXIS, { label: unit, size: 50 }],
       series: [{}, { label, stroke: color, width: 2, value: (u, v) => (v == null ? "–" : `${v.toFixed(unit === "%" ? 0 : 2)} ${unit}`) }],
     };
     const plot = new window.uPlot(options, [[], []], box);
@@ -88,6 +110,8 @@ const plots = (() => {
   let queued = false;
   return {
     series,
+    speed,
+    battery,
     add(pose) {
       const t = pose.t || Date.now() / 1000;
       if (series.t.length && t <= series.t[series.t.length - 1]) return;
@@ -107,7 +131,7 @@ const plots = (() => {
 })();
 
 function onPose(pose) {
-  robot.pose = { ...(robot.pose || {}), ...pose };
+  robot.pose = mergePose(robot, pose);
   showTelemetry();
   showState();
   if (map) map.pose(robot.pose);
@@ -125,17 +149,24 @@ function onCamera(message) {
   document.getElementById("camera-note").textContent = `${message.topic} · ${kind.toUpperCase()} · ${new Date().toLocaleTimeString()}`;
 }
 
+const tasks = new TaskList(document.getElementById("tasklist"), true);
+const diagnostics = new Diagnostics(document.getElementById("diagnostics"));
+let inspector = null;
 const live = connectLive(`/ws/robots/${robotId}/`, {
   snapshot(message) {
+    tasks.load(message.queue ? [message.queue] : []);
+    serverTime(message.server_time);
     Object.assign(robot, message.robots[0]);
     robot.waitingFor = robot.waiting_for || null;
     if (map) { map.setRobots([robot]); map.follow(robotId, 3); }
     showHolder(robot.holder, robot.held_until);
+    showStopHold(robot.stop_hold);
     showState();
     showDoing();
     if (robot.pose) onPose(robot.pose);
+    inspector?.resume();
   },
-  "robot.status"(message) { Object.assign(robot, { state: message.state, link_status: message.link_status, last_seen: message.last_seen }); showState(); if (map) map.update(robotId, { state: message.state, link_status: message.link_status }); },
+  "robot.status"(message) { Object.assign(robot, { state: message.state, link_status: message.link_status, last_seen: message.last_seen }); showStopHold(message.stop_hold); showState(); if (map) map.update(robotId, { state: message.state, link_status: message.link_status }); },
   "robot.transition"(message) {
     robot.state = message.to_state;
     if (message.to_state === "ready") robot.instruction = null;
@@ -148,14 +179,18 @@ const live = connectLive(`/ws/robots/${robotId}/`, {
   "robot.path"(message) { robot.waitingFor = message.waiting_for; showDoing(); if (map) map.path(message); },
   "robot.scan"(message) { if (map) map.setScan(robotId, message.scan); },
   "robot.camera"(message) { onCamera(message); },
+  "robot.diagnostics"(message) { diagnostics.update(message); },
+  "robot.topic"(message) { inspector?.show(message); },
   "lease.update"(message) { showHolder(message.holder, message.expires_at); },
-  "fleet.poses"(message) { message.poses.forEach(onPose); },
+  "fleet.poses"(message) { message.poses.forEach(onPose); message.poses.forEach((pose) => tasks.pose(pose)); },
+  "robot.queue"(message) { tasks.update(message); },
   "command.result"(message) {
     if (message.ok) return;
     if (message.command === "teleop") pad.refused(message.detail); else toast(message.detail, true);
   },
 });
-setInterval(showTelemetry, 2000); // "last seen" ages
+inspector = new Inspector(live, document.getElementById("inspector-form"));
+setInterval(showTelemetry, 500); // "last seen" ages, a stale pose says so
 
 // Control lease: fetch with the CSRF token; the forms still work without JS.
 document.querySelectorAll(".lease-form").forEach((form) => form.addEventListener("submit", async (event) => {
@@ -166,6 +201,15 @@ document.querySelectorAll(".lease-form").forEach((form) => form.addEventListener
     toast(reply.detail);
   } catch (error) { toast(error.message, true); }
 }));
+
+const releaseHold = document.getElementById("release-hold-form");
+if (releaseHold) releaseHold.addEventListener("submit", async (event) => {
+  event.preventDefault();
+  try {
+    toast((await request(releaseHold.getAttribute("action"), {})).detail);
+    showStopHold(null);
+  } catch (error) { toast(error.message, true); }
+});
 
 // ---- teleop ---------------------------------------------------------------------------------------------------
 // One command at a time from whichever source is active (buttons, keys, joystick, gamepad), repeated at 5 Hz
@@ -328,4 +372,4 @@ if (linear && angular) {
   window.addEventListener("blur", () => pad.halt()); // a page left behind never keeps a robot driving
 }
 
-window.fleet = { map, robot, live, pad, plots }; // for the browser tests and the curious
+window.fleet = { map, robot, live, pad, plots, diagnostics, inspector }; // for the browser tests and the curious

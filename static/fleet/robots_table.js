@@ -1,6 +1,6 @@
 // The live robot table: rows keyed by robot id, updated from the snapshot and the deltas; and the telemetry
 // words every page shows the same way (speed, battery, link round trip, last seen, the state shown).
-import { canControl, stateBadge } from "./api.js";
+import { canControl, request, stateBadge, toast } from "./api.js";
 
 const MOVING = 0.01; // m/s or rad/s: slower than this is standing
 
@@ -24,10 +24,38 @@ export function ago(when) {
   return `${Math.floor(seconds / 3600)} h ago`;
 }
 
+// How old a robot's pose is, in seconds, by the server's clock (null without one). The server's clock is
+// told in each snapshot (server_time): a browser whose own clock is off still ages poses right. Computed here,
+// every tick, because a frozen links process sends nothing that could say so.
+export const STALE_S = 2;
+let skew = 0; // our clock minus the server's, in seconds
+export function serverTime(unix) { if (Number.isFinite(unix)) skew = Date.now() / 1000 - unix; }
+export function poseAge(robot) {
+  const t = robot.pose && robot.pose.t;
+  return Number.isFinite(t) ? Math.max(0, Date.now() / 1000 - skew - t) : null;
+}
+
+// What is wrong with a robot's pose, in words: "odometry invalid: x is NaN", "stale (3.2 s)", or "".
+export function poseTrouble(robot) {
+  if (robot.pose && robot.pose.fault) return `odometry invalid: ${robot.pose.fault}`;
+  const age = poseAge(robot);
+  return age != null && age > STALE_S && robot.link_status !== "offline" ? `stale (${age.toFixed(1)} s)` : "";
+}
+
+// A pose from a tick merged into the robot's: a pose without a fault clears the one it had.
+export function mergePose(robot, pose) {
+  const merged = { ...(robot.pose || {}), ...pose };
+  if (!pose.fault) { delete merged.fault; delete merged.fault_since; }
+  return merged;
+}
+
+// Whether the robot's pose has a place (a robot refused from its first message has none).
+export function placed(pose) { return Boolean(pose) && Number.isFinite(pose.x) && Number.isFinite(pose.y); }
+
 // The freshest sign of life: the link's last_seen or the last pose's stamp.
 export function lastSeen(robot) {
   const link = robot.last_seen ? Date.parse(robot.last_seen) / 1000 : 0;
-  const pose = robot.pose && robot.pose.t ? robot.pose.t : 0;
+  const pose = robot.pose && robot.pose.t ? robot.pose.t + skew : 0;
   const latest = Math.max(link, pose);
   return latest > 0 ? latest : null;
 }
@@ -137,17 +165,20 @@ export class RobotTable {
     const robot = this.robots.get(id);
     if (!robot) return;
     const before = shownState(robot);
-    robot.pose = { ...(robot.pose || {}), ...pose };
+    robot.pose = mergePose(robot, pose);
     const cell = document.querySelector(`#robot-${id} .c-speed`);
     if (cell) cell.replaceChildren(this.telemetryCell(robot));
     if (shownState(robot) !== before) this.update(id, {});
   }
 
-  // Every few seconds: "last seen" words age.
+  // Twice a second: "last seen" words age, and a pose too old (or refused) says so.
   tick() {
     this.robots.forEach((robot) => {
       const seen = document.querySelector(`#robot-${robot.id} .t-seen`);
       if (seen) seen.textContent = telemetry.seen(robot);
+      const trouble = document.querySelector(`#robot-${robot.id} .t-trouble`);
+      const words = poseTrouble(robot);
+      if (trouble && trouble.textContent !== words) { trouble.textContent = words; trouble.hidden = !words; }
     });
   }
 
@@ -167,7 +198,9 @@ export class RobotTable {
     const muted = document.createElement("span");
     muted.className = "muted";
     muted.append(part("t-rtt", telemetry.rtt(robot), "link round trip"), " · ", part("t-seen", telemetry.seen(robot), "last seen"));
-    box.append(muted);
+    const trouble = part("t-trouble", poseTrouble(robot), "its pose");
+    trouble.hidden = !trouble.textContent;
+    box.append(muted, trouble);
     return box;
   }
 
@@ -212,14 +245,36 @@ export class RobotTable {
     cell("c-state", stateBadge(shownState(robot)));
     const step = telemetry.step(robot);
     const doing = robot.instruction ? `#${robot.instruction.id} ${robot.instruction.text}${step ? ` · ${step}` : ""}` : "none";
-    const waiting = robot.waitingFor ? ` · ⏸ waiting for ${robot.waitingFor}` : "";
+    const waiting = robot.waitingFor ? ` · ‖ waiting for ${robot.waitingFor}` : "";
     cell("c-instruction", doing + waiting);
     cell("c-speed", this.telemetryCell(robot));
     const held = document.createElement("span");
     held.className = "held";
     held.dataset.holder = robot.holder || "";
     held.textContent = robot.holder ? `held by ${robot.holder}` : "free";
-    cell("c-held", held);
+    cell("c-held", held, ...this.stopHold(robot));
     return tr;
+  }
+
+  // A person's stop holds the robot: its words, and a button that releases it (nothing automatic moves it).
+  stopHold(robot) {
+    if (!robot.stop_hold) return [];
+    const words = document.createElement("span");
+    words.className = "stop-hold";
+    words.title = "nothing automatic moves it until a person releases it or names it";
+    words.textContent = `‖ ${robot.stop_hold}`;
+    if (!canControl()) return [document.createElement("br"), words];
+    const button = document.createElement("button");
+    button.type = "button";
+    button.className = "release-hold";
+    button.textContent = "Release";
+    button.setAttribute("aria-label", `Release ${robot.name} from its stop`);
+    button.addEventListener("click", async () => {
+      try {
+        toast((await request(`/robots/${robot.id}/release/`, {})).detail);
+        this.update(robot.id, { stop_hold: null });
+      } catch (error) { toast(`${robot.name}: ${error.message}`, true); }
+    });
+    return [document.createElement("br"), words, " ", button];
   }
 }

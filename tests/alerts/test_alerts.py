@@ -1,4 +1,4 @@
-"""Alerts: one open per kind and robot, pushed live, acknowledged and resolved by operators, audited."""
+"""Alerts: one per event, pushed live, acknowledged and resolved by operators, audited."""
 
 import asyncio
 
@@ -63,15 +63,75 @@ def test_a_low_battery_raises_once_and_a_charged_one_resolves(robot):
     assert alert.resolved_at is not None
 
 
-def test_stopping_every_robot_raises_one_emergency_stop(robot, operator):
+def test_each_stop_of_every_robot_is_its_own_alert_with_its_own_time_and_person(
+    robot, operator, second_operator
+):
     from execution.control import stop
 
     Robot.objects.create(name="other", endpoint="ws://127.0.0.1:2")
     stop(["tb"], operator)  # one robot of two: not an emergency stop
     assert not Alert.objects.filter(kind="emergency_stop").exists()
     stop(list(Robot.objects.all()), operator)
-    alert = Alert.objects.get(kind="emergency_stop")
-    assert alert.robot is None and alert.severity == "critical" and "otto" in alert.message
+    stop(list(Robot.objects.all()), second_operator)
+    first, last = Alert.objects.filter(kind="emergency_stop").order_by("raised_at")
+    assert first.robot is None and first.severity == "critical" and first.count == 1
+    assert f"by {operator.username}" in first.message and f"by {second_operator.username}" in last.message
+    assert first.raised_at < last.raised_at  # each keeps the time of its own stop
+
+
+def _execution(robot, number: int):
+    from execution.models import Execution, Instruction
+
+    instruction = Instruction.objects.create(text=f"move tb to A #{number}", status="running")
+    return Execution.objects.create(instruction=instruction, robot=robot, status="running")
+
+
+def test_a_stall_and_the_failure_it_ends_in_are_one_alert_and_the_next_execution_another(robot):
+    """The runner's step_failed after a stall's robot_stuck is the same event (execution.runner, handlers)."""
+    first, second = _execution(robot, 1), _execution(robot, 2)
+    stuck = alerts.raise_alert("robot_stuck", robot, "tb: no progress for 3 s (trying again)", first.event)
+    failed = alerts.raise_alert(
+        "step_failed", robot, "instruction #1: tb: blocked by husky at A", first.event
+    )
+    assert failed.pk == stuck.pk and Alert.objects.count() == 1
+    failed.refresh_from_db()
+    assert (failed.kind, failed.count, failed.message) == (
+        "step_failed",
+        2,
+        "instruction #1: tb: blocked by husky at A",
+    )
+    assert failed.raised_at == stuck.raised_at  # the time the event began
+    again = alerts.raise_alert("robot_stuck", robot, "tb: no progress for 3 s (trying again)", second.event)
+    assert again.pk != stuck.pk and Alert.objects.open().count() == 2  # a new execution: a new event
+
+
+def test_an_event_a_person_has_dealt_with_is_not_raised_again(robot, operator):
+    from alerts import service
+
+    execution = _execution(robot, 1)
+    stuck = alerts.raise_alert("robot_stuck", robot, "tb: no progress (trying again)", execution.event)
+    service.acknowledge(stuck.pk, operator)
+    failed = alerts.raise_alert("step_failed", robot, "instruction #1: tb: stuck", execution.event)
+    assert (failed.pk, failed.status) == (stuck.pk, "acknowledged")  # no new toast: count > 1, not open
+    service.resolve(stuck.pk, operator, "moved the box")
+    repeat = alerts.raise_alert("step_failed", robot, "instruction #1: tb: stuck", execution.event)
+    assert (repeat.pk, repeat.status, repeat.count) == (stuck.pk, "resolved", 3)
+    assert service.open_count() == 0 and Alert.objects.count() == 1
+
+
+def test_a_condition_a_person_resolved_early_is_not_raised_again_until_it_ends(robot, operator):
+    from alerts import service
+
+    check_battery(robot.pk, {"percentage": 0.12})
+    low = Alert.objects.get(kind="low_battery")
+    service.resolve(low.pk, operator, "charger on its way")
+    check_battery(robot.pk, {"percentage": 0.11})  # still low: the same event
+    assert service.open_count() == 0 and Alert.objects.count() == 1
+    check_battery(robot.pk, {"percentage": 0.9})  # charged: the event ended
+    check_battery(robot.pk, {"percentage": 0.1})  # low again: a new event
+    assert Alert.objects.open().get(kind="low_battery").pk != low.pk
+    low.refresh_from_db()
+    assert low.ended_at is not None and low.count == 2
 
 
 # ----- the API -----

@@ -27,8 +27,8 @@ def test_lane_targets_alternate_forward_and_back_at_equal_distance():
 def test_lanes_parse_gives_each_robot_its_own_targets_in_turn():
     a, b = link(), link("robot2", "/robot2/cmd_vel", (-4.5, -0.9, 0.0))
     parse = execution.lanes_parse([a, b], 2)
-    assert parse["valid"] and not parse["needs_user"]
-    assert [(s["robots"], s["destination"]["name"]) for s in parse["steps"]] == [
+    assert parse.valid and not parse.needs_user
+    assert [(s["robots"], s["destination"]["name"]) for s in parse.steps] == [
         (["robot1"], "robot1 lane 1"),
         (["robot2"], "robot2 lane 1"),
         (["robot1"], "robot1 lane 2"),

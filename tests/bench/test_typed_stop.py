@@ -8,7 +8,6 @@ import pytest
 
 from bench import report, typed_stop
 from experiments.probe import RobotLink
-from fleetcore.steps import validate
 
 # (p50, p99, missing, moving, stops, answered_ms) per kind of stop: made up, no timing is asserted
 KINDS = {
@@ -47,9 +46,13 @@ def synthetic(unreachable_p99=12.0):
 
 def test_the_rotate_instruction_is_one_robot_turning_and_passes_the_step_contract():
     parse = typed_stop.rotate_parse("husky")
-    (step,) = validate(parse["steps"])
-    assert (step.action, step.robots, step.task) == ("rotate", ("husky",), f"rotate({typed_stop.TURNS})")
-    assert parse["valid"] and not parse["needs_user"]
+    (step,) = parse.checked()
+    assert (step.action, step.robots.names, step.task) == (
+        "rotate",
+        ("husky",),
+        f"rotate({typed_stop.TURNS})",
+    )
+    assert parse.valid and not parse.needs_user
 
 
 def test_a_robot_is_moving_only_for_a_non_zero_command_in_the_window():

@@ -12,7 +12,7 @@ import pytest
 
 from tests.chaos.system import RunningSystem
 
-FIGURES: list[dict] = []  # one row per fault, printed at the end of the run (README "Fault survival")
+FIGURES: list[dict] = []  # one row per fault, printed at the end of the run (docs/fault-survival.md)
 OUT = "FLEET_CHAOS_OUT"  # a JSON file for the rows as well (python -m bench.chaos sets it)
 
 

@@ -181,6 +181,13 @@ class RunningSystem:
             return False
         return process.state == "RUNNING" and process.pid not in (0, old_pid)
 
+    def beating(self, name: str, within: float = 1.0) -> bool:
+        """Whether the process has renewed its heartbeat file within the last `within` seconds."""
+        try:
+            return time.time() - self.layout.beat(name).stat().st_mtime < within
+        except FileNotFoundError:
+            return False  # not beaten since its start
+
     # ----- the portal, as a logged-in person sees it -----
     def browser(self) -> urllib.request.OpenerDirector:
         """A logged-in session (the demo admin) whose redirects are not followed."""

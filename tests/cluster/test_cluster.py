@@ -113,7 +113,7 @@ def test_the_fleet_survives_losing_an_executor_host_a_web_host_and_a_simulator_s
         on_exec1 = sorted(driven["exec1"])
 
         # exec1 lost: every process of the host killed mid-work. Its robots come to rest and their instructions
-        # are settled (failed "executor lost", README "Executor lost") within 10 s.
+        # are settled (failed "executor lost", docs/fault-survival.md, "Executor lost") within 10 s.
         killed = cluster.kill_host("exec1")
         assert len(killed) >= 2  # the instructions worker and the control worker (and their pool)
         lost = time.monotonic()

@@ -33,7 +33,9 @@ def test_move_to_a_and_clean_moves_only_the_nearest_free_capable_robot(
     moved = {name: d for name, d in displacements(sim, before).items() if d > 0.3}
     assert list(moved) == ["husky"], moved
     assert math.dist(sim.pose("husky")[:2], A) < 1.0  # cleaned around A
-    assert instruction.outcome.startswith("husky: nearest free robot, 4.0 m (turtlebot 4.7+ m, tiago 5.4+ m")
+    assert instruction.outcome.startswith(
+        "husky chosen (no robot named): the nearest free robot, 4.0 m to A (turtlebot 4.7+ m, tiago 5.4+ m"
+    )
 
 
 def contacts(sim) -> list:
@@ -93,7 +95,7 @@ def test_two_pairs_swapping_places_across_each_others_paths_finish_without_conta
         said = transitions(name)[-1][2]  # the words of its last transition: what it did
         # On arrival a place may be too tight for a big robot (tiago at robot4's start, robot3 parked beside
         # it): it stops at the nearest free spot and says so.
-        assert off < 0.25 or ("its spot was taken" in said and off < 0.6), (name, off, said)
+        assert off < 0.25 or ("at a free spot" in said and off < 0.6), (name, off, said)
 
 
 @pytest.mark.timeout(300)
@@ -122,6 +124,7 @@ def test_an_idle_robot_parked_in_a_narrow_way_makes_way_and_comes_back(warehouse
     assert made_way.status == "succeeded" and made_way.outcome.startswith(
         "tb12: succeeded (made way for husky6"
     ), made_way.outcome
+    assert (made_way.user, made_way.cause) == (None, f"make way for husky6, instruction #{through.pk} by ada")
     assert off_line < 0.5  # the Husky went through the passage, not round the racks
     assert farthest > 1.0  # it moved off the Husky's way (its spot to the passage's side is off the rack)
     assert math.dist(sim.pose("husky6")[:2], east) < 0.3

@@ -36,7 +36,7 @@ def test_dock_drives_a_robot_onto_its_docking_station(nav2_world, fleet_admin):
 def test_dock_without_a_docking_action_goes_home(nav2_world, fleet_admin):
     robot = nav2_world.fleet.robots["turtlebot"]
     start = robot.pose()
-    moved = wait_final(submit("move turtlebot to Room 1", fleet_admin), timeout=100)
+    moved = wait_final(submit("move turtlebot to I", fleet_admin), timeout=100)  # 1.8 m from its start
     assert moved.status == "succeeded", moved.outcome
     assert math.dist(nav2_world.call(robot.pose)[:2], start[:2]) > 0.5
     instruction = wait_final(submit("turtlebot, go home", fleet_admin), timeout=100)

@@ -9,6 +9,7 @@ from execution import dispatch, queries
 from execution.instructions import submit
 from execution.models import Execution
 from fleetcore.actions import ACTIONS
+from fleetcore.interpretation import Interpretation
 from interpreter.service import interpret
 from places.worlds import load_world_into_db
 from robots.models import Binding, Robot
@@ -41,7 +42,7 @@ def fleet(seeded_ontology, exec_settings, monkeypatch):
 
 def planned(text, user) -> set[str]:
     result = interpret(text)
-    assert result["valid"], result["question"]
+    assert result.valid, result.question
     return {robot.name for robot, _ in dispatch.plan(result, user).items()}
 
 
@@ -72,7 +73,10 @@ def test_a_sequence_for_any_turtlebot_stays_with_the_one_chosen(fleet, fleet_adm
 def test_no_robot_of_the_model_is_a_refusal_in_words(fleet, fleet_admin):
     with pytest.raises(dispatch.Refused, match="No robot"):
         dispatch.plan(
-            {"steps": [{"action": "wait", "robots": {"any": True, "model": "spot"}, "amount": 1}]}, None
+            Interpretation.direct(
+                [{"action": "wait", "robots": {"any": True, "model": "spot"}, "amount": 1}], ""
+            ),
+            None,
         )
 
 

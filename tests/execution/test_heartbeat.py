@@ -23,7 +23,7 @@ def test_a_beating_command_loop_keeps_the_lock_past_its_time_to_live(lock):
         for _ in range(16):  # 0.8 s: twice the lock's time to live
             heartbeat.beat()
             time.sleep(0.05)
-        assert heartbeat.held and coordination.lock_holder(1) == lock.token
+        assert heartbeat.held and coordination.lock_holders([1])[1] == lock.token
     finally:
         heartbeat.stop()
 
@@ -32,7 +32,7 @@ def test_a_hung_command_loop_lets_the_lock_lapse_for_the_watchdog(lock):
     heartbeat = coordination.Heartbeat(lock, every=0.05, lively=0.1).start()
     try:
         time.sleep(0.8)  # no beat: after 0.1 s the heartbeat stops renewing, 0.4 s later the lock is gone
-        assert coordination.lock_holder(1) is None
+        assert coordination.lock_holders([1])[1] is None
         assert not heartbeat.held  # the loop, if it ever wakes, sends nothing more
     finally:
         heartbeat.stop()
@@ -60,7 +60,9 @@ def test_redis_lost_under_a_command_loop_fails_the_step_as_executor_lost(lock, m
 
     import redis
 
-    from execution.steps import REDIS_LOST, Interrupted, Session, run_step
+    from execution import handlers
+    from execution.handlers import run_step
+    from execution.steps import REDIS_LOST, Interrupted, Session
 
     def unreachable(*_args):
         raise redis.ConnectionError("Error 111 connecting to redis.sock. Connection refused.")
@@ -68,14 +70,14 @@ def test_redis_lost_under_a_command_loop_fails_the_step_as_executor_lost(lock, m
     heartbeat = coordination.Heartbeat(lock).start()
     link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=SimpleNamespace(value=None))
     session = Session(SimpleNamespace(pk=1), link, heartbeat)
-    monkeypatch.setattr(coordination, "flags", unreachable)
+    monkeypatch.setattr(coordination, "session_flags", unreachable)
     try:
         with pytest.raises(Interrupted) as failure:
             session.check()
         assert failure.value.outcome == "failed" and failure.value.reason.startswith(REDIS_LOST)
 
         # a Redis error from anywhere in a step's handler (e.g. releasing its route) says the same
-        monkeypatch.setattr("execution.steps.import_string", lambda _path: lambda *_args: unreachable())
+        monkeypatch.setitem(handlers.HANDLERS, "go_to", lambda *_args: unreachable())
         with pytest.raises(Interrupted) as failure:
             run_step(
                 session, {"action": "move", "robots": ["tb"], "destination": {"name": "X", "x": 1, "y": 0}}

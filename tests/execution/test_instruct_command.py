@@ -51,7 +51,7 @@ def test_instruct_speed_words_drive_the_robot_at_that_speed(turtle_world, fleet_
     """Every speed word the interpreter knows runs, and the simulated robot's applied speed stays within it."""
     import threading
 
-    from fleetcore.steps import speed_factor
+    from fleetcore.speed import Limits, pace
 
     Location.objects.create(map=Location.objects.first().map, name="Dock", x=-1.6, y=-0.5)
     body = turtle_world.fleet.robots["turtlebot"].body
@@ -70,7 +70,8 @@ def test_instruct_speed_words_drive_the_robot_at_that_speed(turtle_world, fleet_
         watcher.join(5)
     x, y, _ = turtle_world.call(turtle_world.fleet.robots["turtlebot"].pose)
     assert abs(x - -1.6) < 0.15 and abs(y - -0.5) < 0.15  # it arrived
-    limit = Instruction.objects.get().robots.get().max_linear * speed_factor(speed)
+    robot = Instruction.objects.get().robots.get()
+    limit = pace(speed, Limits(robot.max_linear, robot.max_angular)).limits.linear
     assert 0.0 < fastest[0] <= limit * 1.05  # it moved, never faster than the word asked
 
 

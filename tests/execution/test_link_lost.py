@@ -72,8 +72,14 @@ def test_link_lost_while_moving_fails_the_step_and_the_robot_gets_a_zero_when_ba
         what="a zero on reconnection",
     )
     wait_for(lambda: _online("turtlebot"), what="online again")
-    offline = Alert.objects.get(kind="robot_offline", robot__name="turtlebot")
-    assert offline.resolved_at is not None and offline.resolution == "link up again"
+    # the links process writes the robot online, then resolves its alert: a moment apart
+    offline = wait_for(
+        lambda: Alert.objects.filter(
+            kind="robot_offline", robot__name="turtlebot", resolved_at__isnull=False
+        ).first(),
+        what="the offline alert resolved",
+    )
+    assert offline.resolution == "link up again"
     assert (
         Alert.objects.open()
         .filter(kind="step_failed", robot__name="turtlebot", message__contains="link lost")

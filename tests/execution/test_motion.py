@@ -8,7 +8,8 @@ from hypothesis import strategies as st
 
 from fleetcore import geometry, motion
 from fleetcore.motion import GoToGoal, Limits, Rotate
-from fleetcore.steps import SPEEDS, StepError, parse_task, speed_factor
+from fleetcore.speed import SPEEDS, UnknownSpeed, pace
+from fleetcore.steps import StepError, parse_task
 
 TB3 = Limits(0.22, 2.84)
 
@@ -34,13 +35,11 @@ def simulate(controller, pose, dt=0.05, steps=20000):
     st.sampled_from([None, *SPEEDS]),
 )  # fmt: skip
 def test_go_to_goal_arrives_within_tolerance_and_limits(x, y, yaw, gx, gy, speed):
-    factor = speed_factor(speed)
-    controller = GoToGoal((gx, gy), TB3, factor)
+    driven = pace(speed, TB3).limits
+    controller = GoToGoal((gx, gy), driven)
     (fx, fy, _), commands = simulate(controller, (x, y, yaw))
     assert math.hypot(fx - gx, fy - gy) < motion.TOLERANCE
-    assert all(
-        abs(c.v) <= TB3.linear * factor + 1e-9 and abs(c.w) <= TB3.angular * factor + 1e-9 for c in commands
-    )
+    assert all(abs(c.v) <= driven.linear + 1e-9 and abs(c.w) <= driven.angular + 1e-9 for c in commands)
     assert commands[-1] == motion.STOP
 
 
@@ -96,10 +95,13 @@ def test_parse_task_refuses_unknown_tasks(task):
 
 
 def test_speed_words_and_unknown_speed():
-    assert speed_factor("slow") < speed_factor(None) < speed_factor("fast") <= 1.0
-    assert speed_factor("very fast") == 1.0
-    with pytest.raises(StepError, match="warp"):
-        speed_factor("warp")
+    def linear(word):
+        return pace(word, TB3).limits.linear
+
+    assert linear("slow") < linear(None) < linear("fast") <= TB3.linear
+    assert pace("very fast", TB3).limits == TB3
+    with pytest.raises(UnknownSpeed, match="warp"):
+        pace("warp", TB3)
 
 
 def test_limits_must_be_positive():
@@ -109,9 +111,12 @@ def test_limits_must_be_positive():
 
 def test_map_pose_is_odometry_composed_with_start_pose():
     odom = {"pose": {"pose": {"position": {"x": 1.0, "y": 0.0}, "orientation": geometry.quaternion(0.0)}}}
-    x, y, yaw = geometry.map_pose(odom, [2.0, 1.0, math.pi / 2])
-    assert (x, y, yaw) == pytest.approx((2.0, 2.0, math.pi / 2))
-    assert geometry.map_pose(odom, []) == pytest.approx((1.0, 0.0, 0.0))
+
+    def map_pose(start):  # as the pose hub composes them (robots/poses.py)
+        return geometry.compose(geometry.start_offset(start), geometry.pose_of(odom))
+
+    assert map_pose([2.0, 1.0, math.pi / 2]) == pytest.approx((2.0, 2.0, math.pi / 2))
+    assert map_pose([]) == pytest.approx((1.0, 0.0, 0.0))
 
 
 def test_velocity_messages_per_type_and_ros_version():

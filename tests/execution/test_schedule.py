@@ -90,4 +90,5 @@ def test_a_robot_held_by_another_operator_is_refused(table12_world, operator, se
     instruction = submit("move tiago to G", operator, parse=parse(step(["tiago"], 1.0, -1.0, "G")))
     assert instruction.status == "refused"
     assert "held by olga" in instruction.outcome
-    assert coordination.lock_holder(Robot.objects.get(name="tiago").pk) is None
+    tiago = Robot.objects.get(name="tiago").pk
+    assert coordination.lock_holders([tiago])[tiago] is None

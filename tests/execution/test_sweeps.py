@@ -34,18 +34,27 @@ def test_a_received_instruction_a_minute_old_fails_and_a_fresh_one_is_left(robot
     assert fresh.status == "received"
 
 
-def test_an_unanswered_question_is_cancelled_and_its_robot_leaves_the_dialog(robot):
+def test_an_unanswered_question_expires_with_a_note_its_robot_leaves_the_dialog_and_progress(robot, settings):
     from fleetcore.states import Event
 
+    settings.FLEET_QUESTION_EXPIRY_SECONDS = 600
     Robot.objects.filter(pk=robot.pk).update(state=Robot.State.READY)
-    old = instruction("needs_user", sweeps.ANSWER_S + 5, interpreted_at=ago(sweeps.ANSWER_S + 5))
+    old = instruction("needs_user", 605, interpreted_at=ago(605), outcome="Which robot?")
     Robot.objects.transition(robot.pk, Event.ASK, "Which robot?", old)
     recent = instruction("needs_user", 5, interpreted_at=ago(5))
-    assert sweeps.sweep()["needs_user"] == [old.pk]
+    assert sweeps.sweep()["needs_user"] == [old.pk]  # the scheduler runs the sweeps every tick
     old.refresh_from_db(), recent.refresh_from_db(), robot.refresh_from_db()
-    assert old.status == "cancelled" and "no answer" in old.outcome
-    assert recent.status == "needs_user"
+    assert (old.status, old.outcome) == ("cancelled", "Which robot? (expired: no answer within 10 min)")
+    assert old.expired and not recent.expired and recent.status == "needs_user"
     assert robot.state == Robot.State.READY
+    assert list(Instruction.objects.in_progress_list()) == [recent]  # the console's Progress list drops it
+
+
+def test_the_question_expiry_is_a_setting(robot, settings):
+    settings.FLEET_QUESTION_EXPIRY_SECONDS = 90
+    waited = instruction("needs_user", 95, interpreted_at=ago(95))
+    assert sweeps.sweep()["needs_user"] == [waited.pk]
+    assert Instruction.objects.get(pk=waited.pk).outcome.endswith("(expired: no answer within 90 s)")
 
 
 def test_work_queued_for_a_robot_offline_too_long_fails_and_settles_its_instruction(robot):
@@ -92,7 +101,7 @@ def test_a_queued_instruction_without_any_execution_fails_after_the_deadline(rob
 def test_after_the_sweeps_only_owned_statuses_remain(robot):
     """Every non-final status either has its owner (a fresh row, a live runner) or has been finished."""
     instruction("received", sweeps.RECEIVED_S + 5)
-    instruction("needs_user", sweeps.ANSWER_S + 5, interpreted_at=ago(sweeps.ANSWER_S + 5))
+    instruction("needs_user", sweeps.answer_s() + 5, interpreted_at=ago(sweeps.answer_s() + 5))
     instruction("queued", sweeps.RECEIVED_S + 5)
     sweeps.sweep()
     assert not Instruction.objects.open().exists()

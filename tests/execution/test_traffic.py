@@ -9,9 +9,11 @@ import pytest
 from django.core.cache import cache
 
 import live
-from execution import traffic
+from execution import coordination, driving, make_way, route, traffic, traffic_fleet, traffic_state
+from execution.steps import StepFailed
 from fleetcore import motion
 from fleetcore import traffic as plain
+from fleetcore import traffic_tuning as tune
 from places.worlds import load_world_into_db
 from robots.models import Robot
 from tests.fleetcore.test_traffic import position
@@ -37,7 +39,7 @@ def test_a_claimed_stretch_is_refused_to_a_robot_crossing_it_until_released(robo
     assert traffic.claim(a, (-2.0, 0.0), (2.0, 0.0)) is None
     assert traffic.claim(b, (0.0, -2.0), (0.0, 2.0)) == a.pk  # across a's stretch: a is in the way
     assert traffic.claim(b, (0.0, -2.0), (0.0, -1.0)) is None  # short of it: free
-    traffic.release(a, (2.0, 0.0, 0.0))  # a has arrived and parks at (2, 0)
+    traffic_state.release(a, (2.0, 0.0, 0.0))  # a has arrived and parks at (2, 0)
     assert traffic.claim(b, (0.0, -1.0), (0.0, 2.0)) is None
     assert traffic.claim(b, (0.0, 2.0), (2.0, 0.3)) == a.pk  # onto where a parked
     assert traffic.claim(b, (0.0, 2.0), (-1.0, 3.0)) is None  # and away from it
@@ -48,9 +50,13 @@ def test_a_robot_on_time_lets_one_late_on_its_plan_pass_first_where_that_one_was
     b, on time, is refused its stretch across a's way (a goes first there, as planned). Once a holds a
     stretch past the crossing, b gets it; a robot whose step ended (released) holds nobody up by its plan."""
     a, b = robots["a"], robots["b"]
-    redis, now = traffic.coordination.connection(), time.time()
-    traffic._reserve(redis, a, [(-2.0, 0.0, now), (2.0, 0.0, now + 4.0)], traffic.reach(a), now, 30.0)
-    traffic._reserve(redis, b, [(0.0, -2.0, now), (0.0, 2.0, now + 8.0)], traffic.reach(b), now, 30.0)
+    redis, now = coordination.connection(), time.time()
+    traffic_state.reserve(
+        redis, a, [(-2.0, 0.0, now), (2.0, 0.0, now + 4.0)], traffic_fleet.reach(a), now, 30.0
+    )
+    traffic_state.reserve(
+        redis, b, [(0.0, -2.0, now), (0.0, 2.0, now + 8.0)], traffic_fleet.reach(b), now, 30.0
+    )
     assert traffic.claim(a, (-2.0, 0.0), (-2.0, 0.0), planned=(now, now)) is None  # a stands, late
     across = ((0.0, -1.0), (0.0, 1.0))
     assert traffic.claim(b, *across, planned=(now + 3.0, now + 5.0)) == a.pk
@@ -59,7 +65,7 @@ def test_a_robot_on_time_lets_one_late_on_its_plan_pass_first_where_that_one_was
     assert traffic.claim(b, *across, planned=(now + 3.0, now + 5.0)) is None
     assert traffic.claim(b, (0.0, -1.5), (0.0, -1.5), planned=(now + 1.0, now + 1.0)) is None  # b back
     traffic.claim(a, (-2.0, 0.0), (-2.0, 0.0), planned=(now, now))  # (a, as late as before)
-    traffic.release(a, None)
+    traffic_state.release(a, None)
     assert traffic.claim(b, *across, planned=(now + 3.0, now + 5.0)) is None
 
 
@@ -69,11 +75,11 @@ def test_a_plan_goes_around_the_path_reserved_before_it(robots):
     second = traffic.plan(b, (0.0, -2.0), (0.0, 2.0), 0.3)
     assert second[-1][:2] == (0.0, 2.0) and first[-1][:2] == (2.0, 0.0)
     table = plain.ReservationTable()
-    table.reserve_path("a", first, traffic.reach(a), lambda t: 0.0)
+    table.reserve_path("a", first, traffic_fleet.reach(a), lambda t: 0.0)
     crossing = [
         table.holder(cells, t0, t1, "b")
         for p, q in itertools.pairwise(second)
-        for cells, t0, t1 in plain.leg_slots(p, q, traffic.reach(b), lambda t: 0.0)
+        for cells, t0, t1 in plain.leg_slots(p, q, traffic_fleet.reach(b), lambda t: 0.0)
     ]
     assert not any(crossing)  # b passes where a is not, when it passes
     assert (
@@ -83,26 +89,26 @@ def test_a_plan_goes_around_the_path_reserved_before_it(robots):
 
 def test_a_wait_for_cycle_is_broken_by_the_robot_that_gave_way_least_then_the_highest_id(robots):
     a, b = robots["a"], robots["b"]
-    redis = traffic.coordination.connection()
-    before = traffic.deadlocks()
-    traffic._put(redis, "waits", a.pk, {"for": b.pk, "expires": 1e12})
+    redis = coordination.connection()
+    before = traffic_state.deadlocks()
+    traffic_state.write(redis, "waits", a.pk, {"for": b.pk, "expires": 1e12})
     traffic._check_deadlock(redis, a.pk)  # a waits for b, b for nobody: a chain, no deadlock
-    traffic._put(redis, "waits", b.pk, {"for": a.pk, "expires": 1e12})
+    traffic_state.write(redis, "waits", b.pk, {"for": a.pk, "expires": 1e12})
     low, high = sorted((a, b), key=lambda r: r.pk)
     traffic._check_deadlock(redis, low.pk)  # the lower id keeps waiting
     with pytest.raises(traffic.Reroute) as caught:
         traffic._check_deadlock(redis, high.pk)
     assert caught.value.around == {low.pk}
-    assert traffic.deadlocks() == before + 1
+    assert traffic_state.deadlocks() == before + 1
     traffic._check_deadlock(redis, low.pk)  # broken once: the breaker waits no more, low keeps waiting
-    assert traffic.deadlocks() == before + 1
+    assert traffic_state.deadlocks() == before + 1
     # the same two wait for each other again (the reroute did not get high out of low's way): low gives way
-    traffic._put(redis, "waits", high.pk, {"for": low.pk, "expires": 1e12})
+    traffic_state.write(redis, "waits", high.pk, {"for": low.pk, "expires": 1e12})
     traffic._check_deadlock(redis, high.pk)
     with pytest.raises(traffic.Reroute) as caught:
         traffic._check_deadlock(redis, low.pk)
     assert caught.value.around == {high.pk}
-    assert traffic.deadlocks() == before + 2
+    assert traffic_state.deadlocks() == before + 2
 
 
 def test_a_waiting_robot_notes_the_stretch_it_waits_to_drive_and_a_deadlock_log_gives_each(
@@ -111,15 +117,15 @@ def test_a_waiting_robot_notes_the_stretch_it_waits_to_drive_and_a_deadlock_log_
     """What a deadlock's log line says of each robot of the cycle: whom it waits for, why, and the stretch it
     waits to drive (how the face-to-face cycles of runs bd and after were told apart)."""
     a, b = robots["a"], robots["b"]
-    monkeypatch.setattr(traffic, "WAIT_LIMIT_S", 0.3)
+    monkeypatch.setattr(tune, "WAIT_LIMIT_S", 0.3)
     assert traffic.claim(b, (0.0, -2.0), (0.0, 2.0)) is None  # b holds a stretch across a's way
-    with pytest.raises(traffic.StepFailed):
+    with pytest.raises(StepFailed):
         traffic.wait_for(StandingSession(a, (-2.0, 0.0, 0.0)), (-2.0, 0.0), (2.0, 0.0))
-    redis = traffic.coordination.connection()
-    wait = traffic._hash(redis, "waits")[a.pk]
+    redis = coordination.connection()
+    wait = traffic_state.read(redis, "waits")[a.pk]
     assert (wait["for"], wait["why"], wait["to"]) == (b.pk, "room", [[-2.0, 0.0], [2.0, 0.0]])
     across = {"for": a.pk, "why": "room", "to": [[0.0, -2.0], [0.0, 2.0]], "expires": 1e12}
-    traffic._put(redis, "waits", b.pk, across)  # and b waits for a: a cycle
+    traffic_state.write(redis, "waits", b.pk, across)  # and b waits for a: a cycle
     caplog.set_level("INFO", logger="execution.traffic")
     with pytest.raises(traffic.Reroute):
         for robot in sorted((a, b), key=lambda r: r.pk):  # the higher id breaks it
@@ -149,23 +155,23 @@ def test_a_map_that_opens_now_gets_the_reserved_routes_and_the_waits(robots):
 
     a, b, c = robots["a"], robots["b"], robots["c"]
     traffic.plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
-    traffic._put(traffic.coordination.connection(), "waits", b.pk, {"for": a.pk, "expires": 1e12})
+    traffic_state.write(coordination.connection(), "waits", b.pk, {"for": a.pk, "expires": 1e12})
     rows = {row["name"]: row for row in robot_rows([a, b, c])}
     route = rows["a"]["route"]
-    assert route[0] == [-2.0, 0.0] and route[-1] == [2.0, 0.0] and len(route) <= traffic.MAP_POINTS + 2
+    assert route[0] == [-2.0, 0.0] and route[-1] == [2.0, 0.0] and len(route) <= tune.MAP_POINTS + 2
     assert rows["a"]["waiting_for"] is None and rows["b"]["waiting_for"] == "a"
     assert "route" not in rows["c"]  # not under traffic
     assert robot_rows([b])[0]["waiting_for"] == "a"  # named though not among the rows
-    traffic.release(a, (2.0, 0.0, 0.0))
-    traffic.coordination.connection().hdel(traffic._key("waits"), str(b.pk))
+    traffic_state.release(a, (2.0, 0.0, 0.0))
+    coordination.connection().hdel(traffic_state.key("waits"), str(b.pk))
     assert "route" not in robot_rows([a])[0]
 
 
 def test_stretches_are_short_and_keep_the_planned_waits():
     path = [(0.0, 0.0, 0.0), (3.0, 0.0, 10.0), (3.0, 0.0, 12.0), (3.0, 1.0, 15.0)]
-    legs = traffic.stretches(path)
+    legs = driving.stretches(path)
     assert all(
-        math.dist(p[:2], q[:2]) <= traffic.LEG_M + 1e-9 for p, q in zip([path[0], *legs], legs, strict=False)
+        math.dist(p[:2], q[:2]) <= tune.LEG_M + 1e-9 for p, q in zip([path[0], *legs], legs, strict=False)
     )
     assert [leg[3] for leg in legs].count(True) == 1 and legs[-1][:2] == (3.0, 1.0)
 
@@ -191,7 +197,7 @@ def test_a_robot_that_has_not_planned_yet_is_gone_round_as_standing_for_good(rob
     closest = min(
         plain.segment_distance((0.0, -2.0), (0.0, -2.0), p[:2], q[:2]) for p, q in itertools.pairwise(path)
     )
-    assert closest >= traffic.reach(a) + traffic.reach(b)
+    assert closest >= traffic_fleet.reach(a) + traffic_fleet.reach(b)
 
 
 def test_when_the_reservations_leave_no_plan_the_robot_has_none_and_reserves_nothing(robots):
@@ -199,19 +205,19 @@ def test_when_the_reservations_leave_no_plan_the_robot_has_none_and_reserves_not
     plan (its travel stands and plans again), not a plan blind to the others (every deadlock of a run
     followed one such plan), and nothing of it is reserved."""
     a, c = robots["a"], robots["c"]
-    redis, now = traffic.coordination.connection(), time.time()
-    goal_cells = plain.footprint_cells((4.0, -2.0), traffic.reach(a) + 0.2)
+    redis, now = coordination.connection(), time.time()
+    goal_cells = plain.footprint_cells((4.0, -2.0), traffic_fleet.reach(a) + 0.2)
     entry = {
         "cells": [[col, row, now + 1.0, now + 1000.0] for col, row in goal_cells],
         "goal": [4.0, 4.0],
-        "r": traffic.reach(c),
+        "r": traffic_fleet.reach(c),
         "at": now + 1000.0,
         "expires": now + 2000.0,
     }
-    traffic._put(redis, "plans", c.pk, entry)
+    traffic_state.write(redis, "plans", c.pk, entry)
     assert traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5) is None
-    assert a.pk not in traffic._hash(redis, "plans") and a.pk not in traffic._hash(redis, "timed")
-    traffic.release(c, None)
+    assert a.pk not in traffic_state.read(redis, "plans") and a.pk not in traffic_state.read(redis, "timed")
+    traffic_state.release(c, None)
     assert traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)[-1][:2] == (4.0, -2.0)  # once it has gone
 
 
@@ -226,14 +232,14 @@ def test_plans_keep_more_room_between_robots_than_the_claims_ask(robots):
     end = max(first[-1][2], second[-1][2])
     times = [first[0][2] + i * 0.05 for i in range(int((end - first[0][2]) / 0.05))]
     closest = min(math.dist(position(first, t), position(second, t)) for t in times)
-    assert closest >= traffic.reach(a) + traffic.reach(b) + 2 * traffic.SPACING_M
+    assert closest >= traffic_fleet.reach(a) + traffic_fleet.reach(b) + 2 * tune.SPACING_M
 
 
 def test_a_goal_kept_from_an_earlier_plan_next_to_a_robot_standing_is_reached_by_a_search(robots, caplog):
     a, b = robots["a"], robots["b"]  # b stands at (0, -2)
     near_b = (
         0.0,
-        -2.0 + traffic.reach(a) + traffic.reach(b) + traffic.CLAIM_MARGIN + 0.03,
+        -2.0 + traffic_fleet.reach(a) + traffic_fleet.reach(b) + tune.CLAIM_MARGIN + 0.03,
     )  # inside the margins
     with caplog.at_level("INFO", logger="execution.traffic"):
         path = traffic.plan(a, (-2.0, 0.0), near_b, 0.5, settled=True)  # kept: nobody would touch it there
@@ -246,11 +252,11 @@ def test_a_plan_to_a_goal_next_to_a_robot_standing_goes_round_it_as_far_as_the_c
     let it, so each of its stretches is granted (planned round b at b's bare size, it passed 0.04 m too near:
     refused there, rerouted and planned the same, four times, and the step failed: run av)."""
     a, b = robots["a"], robots["b"]  # b stands at (0, -2)
-    west_of_b = (-(traffic.reach(a) + traffic.reach(b) + traffic.CLAIM_MARGIN + 0.03), -2.0)
+    west_of_b = (-(traffic_fleet.reach(a) + traffic_fleet.reach(b) + tune.CLAIM_MARGIN + 0.03), -2.0)
     path = traffic.plan(a, (2.0, -2.0), west_of_b, 0.5, settled=True)
     assert path[-1][:2] == pytest.approx(west_of_b)
     here = (2.0, -2.0)
-    for x, y, _, hold in traffic.stretches(path):
+    for x, y, _, hold in driving.stretches(path):
         if not hold:
             assert traffic.claim(a, here, (x, y)) is None, (here, (x, y))
             here = (x, y)
@@ -260,11 +266,11 @@ def test_a_corner_is_driven_to_closely_and_a_point_on_a_straight_way_loosely():
     round_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 11.2, 1.0, False), (6.0, 11.6, 2.0, False)]
     along_the_shelf = [(8.8, 9.0, 0.0, False), (8.8, 10.0, 1.0, False), (8.8, 11.0, 2.0, False)]
     slight_bend = [(14.0, 2.0, 0.0, False), (14.0, 4.0, 1.0, False), (14.5, 6.0, 2.0, False)]
-    assert traffic._tolerance((8.8, 8.0), round_the_shelf, 1) == traffic.CORNER_TOLERANCE
-    assert traffic._tolerance((8.8, 8.0), along_the_shelf, 1) == traffic.WAYPOINT_TOLERANCE
-    assert traffic._tolerance((14.0, 1.0), slight_bend, 1) == traffic.WAYPOINT_TOLERANCE  # 14 degrees
-    assert traffic._tolerance((8.8, 8.0), round_the_shelf, 0) == traffic.WAYPOINT_TOLERANCE  # from the pose
-    assert traffic.CORNER_TOLERANCE <= motion.TOLERANCE / 2
+    assert driving._tolerance((8.8, 8.0), round_the_shelf, 1) == tune.CORNER_TOLERANCE
+    assert driving._tolerance((8.8, 8.0), along_the_shelf, 1) == tune.WAYPOINT_TOLERANCE
+    assert driving._tolerance((14.0, 1.0), slight_bend, 1) == tune.WAYPOINT_TOLERANCE  # 14 degrees
+    assert driving._tolerance((8.8, 8.0), round_the_shelf, 0) == tune.WAYPOINT_TOLERANCE  # from the pose
+    assert tune.CORNER_TOLERANCE <= motion.TOLERANCE / 2
 
 
 def test_a_robot_giving_way_backs_straight_off_else_aside_and_never_into_a_shelf():
@@ -273,14 +279,14 @@ def test_a_robot_giving_way_backs_straight_off_else_aside_and_never_into_a_shelf
 
     planner = Planner(load_world("warehouse").map, 0.15)
     nose_to_nose = [plain.Capsule((14.45, 3.0), (14.45, 3.0), 0.2, "other")]
-    first = traffic.give_way((14.0, 3.0), nose_to_nose, planner)[0]
-    assert first == pytest.approx((14.0 - traffic.BACK_OFF_M, 3.0))  # straight away from the other
+    first = driving.give_way((14.0, 3.0), nose_to_nose, planner)[0]
+    assert first == pytest.approx((14.0 - tune.BACK_OFF_M, 3.0))  # straight away from the other
     # against a shelf's east face (x 8.5): straight away is into it; it goes aside, never nearer the other
     by_the_shelf = [plain.Capsule((9.2, 9.0), (9.2, 9.0), 0.2, "other")]
-    targets = traffic.give_way((8.8, 9.0), by_the_shelf, planner)
+    targets = driving.give_way((8.8, 9.0), by_the_shelf, planner)
     assert targets and all(planner.free(*planner.to_cell(*t)) for t in targets)
     assert all(math.dist(t, (9.2, 9.0)) > 0.4 for t in targets)
-    assert traffic.give_way((1.0, 1.0), [], planner) == []
+    assert driving.give_way((1.0, 1.0), [], planner) == []
     assert plain.nearest_on((1.0, 1.0), (0.0, 0.0), (2.0, 0.0)) == (1.0, 0.0)
     assert plain.nearest_on((3.0, 1.0), (0.0, 0.0), (2.0, 0.0)) == (2.0, 0.0)
 
@@ -291,9 +297,9 @@ def test_a_trip_goes_where_the_robot_can_turn_and_only_near_its_ends_where_it_ca
     load_world_into_db("warehouse")
     husky = [[-0.495, -0.285], [-0.495, 0.285], [0.495, 0.285], [0.495, -0.285]]
     robot = Robot.objects.create(name="husky", endpoint="ws://sim/husky", footprint=husky)
-    turning = traffic.route.planner_for(robot, turning=True)
+    turning = route.planner_for(robot, turning=True)
     assert turning.radius == pytest.approx(math.hypot(0.495, 0.285), abs=0.01)
-    assert traffic.route.planner_for(robot).radius == pytest.approx(0.285, abs=0.01)
+    assert route.planner_for(robot).radius == pytest.approx(0.285, abs=0.01)
     by_the_rack = (3.05, 8.75)  # 0.45 m from a rack's face: it can stand there, not turn there
     planner, passable = traffic.trip_ground(robot, (1.2, 5.0), (14.0, 14.0))
     assert planner.free(*planner.to_cell(*by_the_rack)) and not passable(plain.cell_of(by_the_rack))
@@ -310,30 +316,30 @@ def test_a_trip_goes_where_the_robot_can_turn_and_only_near_its_ends_where_it_ca
 def test_a_robot_making_way_stands_clear_of_the_route_it_makes_way_for_as_near_as_it_can(robots):
     b = robots["b"]
     request = {"for": robots["a"].pk, "r": 0.5, "route": [[-4.0, -2.0], [4.0, -2.0]]}
-    spot = traffic.aside(b, (0.0, -2.0), request)
-    clear = 0.5 + traffic.reach(b) + traffic.CLAIM_MARGIN + traffic.PLAN_MARGIN
-    assert spot is not None and clear <= abs(spot[1] + 2.0) <= clear + 2 * traffic.ASIDE_STEP, spot
-    planner = traffic.route.planner_for(b)
+    spot = make_way.aside(b, (0.0, -2.0), request)
+    clear = 0.5 + traffic_fleet.reach(b) + tune.CLAIM_MARGIN + tune.PLAN_MARGIN
+    assert spot is not None and clear <= abs(spot[1] + 2.0) <= clear + 2 * tune.ASIDE_STEP, spot
+    planner = route.planner_for(b)
     assert planner.free(*planner.to_cell(*spot))
 
 
 def test_only_idle_robots_on_the_route_are_asked_to_make_way_and_one_asked_is_waited_for(robots):
     a, b, c = robots["a"], robots["b"], robots["c"]
-    redis = traffic.coordination.connection()
+    redis = coordination.connection()
     _, still = traffic.obstacles(redis, a.pk, time.time())
     through = [(-4.0, -2.0), (4.0, -2.0)]  # b stands on it, c far from it
     assert set(traffic._idle_in_the_way(redis, a, through, still)) == {b.pk}
     assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0)) is None  # b under traffic now: not idle
     assert traffic._idle_in_the_way(redis, a, through, still) == {}
-    traffic.release(b, (0.0, -2.0, 0.0))
+    traffic_state.release(b, (0.0, -2.0, 0.0))
     assert traffic._parked(redis, b.pk, waited=5.0)  # parked, not asked: go round it
-    traffic._put(redis, "makeway", b.pk, {"for": a.pk, "sent": True, "refused": "", "expires": 1e12})
+    traffic_state.write(redis, "makeway", b.pk, {"for": a.pk, "sent": True, "refused": "", "expires": 1e12})
     assert not traffic._parked(redis, b.pk, waited=5.0)  # asked: it will make way, wait for it
     assert traffic._idle_in_the_way(redis, c, through, still) == {}  # and nobody else asks it meanwhile
-    traffic.made_way(b, "no free spot off a's way")  # it could not: go round it after all
+    traffic_state.made_way(b, "no free spot off a's way")  # it could not: go round it after all
     assert traffic._parked(redis, b.pk, waited=5.0)
-    traffic.made_way(b)  # back where it was: asked no more, not by a again on this trip
-    assert traffic.way_request(b) is None
+    traffic_state.made_way(b)  # back where it was: asked no more, not by a again on this trip
+    assert traffic_state.way_request(b) is None
     assert traffic._parked(redis, b.pk, waited=5.0)
     assert traffic._idle_in_the_way(redis, a, through, still) == {}
     assert set(traffic._idle_in_the_way(redis, c, through, still)) == {b.pk}  # another robot may ask it
@@ -341,14 +347,14 @@ def test_only_idle_robots_on_the_route_are_asked_to_make_way_and_one_asked_is_wa
 
 def test_a_robot_that_made_way_is_not_asked_again_by_the_same_robot(robots):
     a, b = robots["a"], robots["b"]
-    redis = traffic.coordination.connection()
+    redis = coordination.connection()
     _, still = traffic.obstacles(redis, a.pk, time.time())
     through = [(-4.0, -2.0), (4.0, -2.0)]
-    traffic._request_way(redis, a, {b.pk: None}, through)
-    assert traffic.way_request(b)["for"] == a.pk
-    traffic.made_way(b)
+    traffic_state.request_way(redis, a, traffic_fleet.reach(a), {b.pk: None}, through)
+    assert traffic_state.way_request(b)["for"] == a.pk
+    traffic_state.made_way(b)
     assert traffic._idle_in_the_way(redis, a, through, still) == {}  # a replans: b stands there again
-    redis.hdel(traffic._key("makeway"), str(b.pk))  # the request has lapsed (MAKE_WAY_TTL_S)
+    redis.hdel(traffic_state.key("makeway"), str(b.pk))  # the request has lapsed (MAKE_WAY_TTL_S)
     assert set(traffic._idle_in_the_way(redis, a, through, still)) == {b.pk}
 
 
@@ -373,29 +379,30 @@ def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_it
     robots, monkeypatch
 ):
     a, b = robots["a"], robots["b"]
-    monkeypatch.setattr(traffic, "MAKE_WAY_WAIT_S", 1.0)
-    monkeypatch.setattr(traffic, "MAKE_WAY_POLL_S", 0.05)
-    monkeypatch.setattr(
-        traffic, "is_busy", lambda robot_id: robot_id == a.pk
-    )  # a is busy with its instruction
-    request = {"for": a.pk, "r": traffic.reach(a), "route": [[-4.0, -2.0], [4.0, -2.0]]}
+    monkeypatch.setattr(tune, "MAKE_WAY_WAIT_S", 1.0)
+    monkeypatch.setattr(tune, "MAKE_WAY_POLL_S", 0.05)
+    # a is busy with its instruction
+    monkeypatch.setattr(traffic_fleet, "is_busy", lambda robot_id: robot_id == a.pk)
+    request = {"for": a.pk, "r": traffic_fleet.reach(a), "route": [[-4.0, -2.0], [4.0, -2.0]]}
     aside, home = StandingSession(b, (0.0, -1.0, 0.0)), (0.0, -2.0)
-    assert traffic.until_passed(aside, request, home) >= 1.0  # a waits to plan again: not passed, b stays
-    redis = traffic.coordination.connection()
-    traffic._put(redis, "waits", a.pk, {"for": b.pk, "expires": 1e12})
-    assert traffic.until_passed(aside, request, home) < 0.5  # a waits for b where b stands aside: b goes back
-    redis.hdel(traffic._key("waits"), str(a.pk))
+    assert make_way.until_passed(aside, request, home) >= 1.0  # a waits to plan again: not passed, b stays
+    redis = coordination.connection()
+    traffic_state.write(redis, "waits", a.pk, {"for": b.pk, "expires": 1e12})
+    # a waits for b where b stands aside: b goes back
+    assert make_way.until_passed(aside, request, home) < 0.5
+    redis.hdel(traffic_state.key("waits"), str(a.pk))
     cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": 0.0, "y": -1.0, "yaw": 0.0}, 60)
     traffic.plan(a, (-2.0, -2.0), (2.0, -2.0), 0.3)  # a's plan passes b's home, where b stood
-    entry = traffic._hash(redis, "plans")[a.pk]
+    entry = traffic_state.read(redis, "plans")[a.pk]
     late = [[c, r, t0 - 1000.0, t1 - 1000.0] for c, r, t0, t1 in entry["cells"]]
-    traffic._put(redis, "plans", a.pk, {**entry, "cells": late})  # a is held up: its plan's times are past
+    # a is held up: its plan's times are past
+    traffic_state.write(redis, "plans", a.pk, {**entry, "cells": late})
     assert traffic.claim(a, (-2.0, -2.0), (-1.8, -2.0)) is None  # and it is still west of b's home
-    assert traffic.until_passed(aside, request, home) >= 1.0
-    traffic.release(a, None)
+    assert make_way.until_passed(aside, request, home) >= 1.0
+    traffic_state.release(a, None)
     assert traffic.claim(a, (1.6, -2.0), (2.0, -2.0)) is None  # east of it, on the same plan: passed
-    traffic._put(redis, "plans", a.pk, {**entry, "cells": late})
-    assert traffic.until_passed(aside, request, home) < 0.5
+    traffic_state.write(redis, "plans", a.pk, {**entry, "cells": late})
+    assert make_way.until_passed(aside, request, home) < 0.5
 
 
 def test_a_stalled_robot_backs_off_only_into_room_it_has_claimed(robots):
@@ -420,8 +427,8 @@ def test_a_robot_does_not_plan_again_for_its_goal_where_another_has_yet_to_pass(
     spot = (0.0, 0.6)
     path = traffic.plan(b, (0.0, -2.0), (0.0, 2.0), 0.5)
     assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0), planned=(path[0][2], path[0][2])) is None
-    assert traffic._yet_to_pass(a, spot)
-    assert not traffic._yet_to_pass(a, (3.0, 0.6))  # nowhere near its way
+    assert traffic.yet_to_pass(a, spot)
+    assert not traffic.yet_to_pass(a, (3.0, 0.6))  # nowhere near its way
     end = path[-1]
     assert traffic.claim(b, end[:2], end[:2], planned=(end[2], end[2])) is None  # b at its goal: passed
-    assert not traffic._yet_to_pass(a, spot)
+    assert not traffic.yet_to_pass(a, spot)

@@ -17,7 +17,7 @@ def opened(monkeypatch):
         if url == "ws://down":
             raise OSError("refused")
 
-    monkeypatch.setattr("robots.rosbridge.sync.get_client", get_client)
+    monkeypatch.setattr(watchdog, "get_client", get_client)
     monkeypatch.setattr(watchdog, "_linked", set())
     return asked
 

@@ -15,7 +15,7 @@ import uuid
 import pytest
 
 from alerts.models import Alert
-from execution import coordination, traffic, watchdog
+from execution import coordination, traffic_state, watchdog
 from execution.instructions import submit
 from execution.models import Execution, Instruction
 from fleet import processes
@@ -98,7 +98,7 @@ def test_killed_worker_leaves_the_robot_at_rest_and_the_instruction_failed(
     """The whole worker (parent and pool) is killed: only the scheduler process is left to stop the robot."""
     sim = turtle_world
     instruction, execution = start_moving(sim, fleet_admin)
-    route = traffic.routes([execution.robot_id])[execution.robot_id]["path"]
+    route = traffic_state.routes([execution.robot_id])[execution.robot_id]["path"]
     assert route  # its route is reserved while it drives
     os.killpg(celery_worker.pid, signal.SIGKILL)
     killed_at = sim.call(lambda: sim.fleet.physics.time)
@@ -113,7 +113,9 @@ def test_killed_worker_leaves_the_robot_at_rest_and_the_instruction_failed(
     lost = Alert.objects.open().filter(kind="executor_lost")
     wait_for(lost.exists, timeout=5, what="the executor_lost alert (raised after the settle)")
     assert lost.get().robot.name == "turtlebot" and f"#{instruction.pk}" in lost.get().message
-    assert traffic.routes([execution.robot_id]) == {}  # nobody renews its route: dropped, not left to lapse
+    assert (
+        traffic_state.routes([execution.robot_id]) == {}
+    )  # nobody renews its route: dropped, not left to lapse
     parked = sim.pose("turtlebot")
     wait_for(lambda: sim.call(lambda: sim.fleet.physics.time) > killed_at + 4.0, timeout=10, what="a while")
     assert math.dist(sim.pose("turtlebot")[:2], parked[:2]) < 0.01  # and it stays at rest
@@ -140,5 +142,5 @@ def test_killed_pool_process_is_failed_once_and_its_redelivery_runs_nothing_twic
     assert Execution.objects.get(pk=execution.pk).status == "failed"
     assert [t for t in transitions("turtlebot") if t[1] == "motion"] == [transitions("turtlebot")[1]]
     assert math.dist(sim.pose("turtlebot")[:2], parked[:2]) < 0.01
-    assert coordination.lock_holder(execution.robot_id) is None
+    assert coordination.lock_holders([execution.robot_id])[execution.robot_id] is None
     assert Alert.objects.open().filter(kind="executor_lost").count() == 1

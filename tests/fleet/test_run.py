@@ -8,7 +8,15 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from supervisor.options import ServerOptions
 
 from fleet.run import BASE_DIR, Setup, announcement, programs
-from fleet.supervision import START_RETRIES, Layout, LogRelay, render_config, supervisor_line
+from fleet.supervision import (
+    LOG_BACKUPS,
+    LOG_BYTES,
+    START_RETRIES,
+    Layout,
+    LogRelay,
+    render_config,
+    supervisor_line,
+)
 from simworker.testing import free_port
 
 
@@ -61,6 +69,7 @@ def test_the_embedded_redis_starts_with_the_supervisor_and_before_the_rest(tmp_p
     (redis,) = groups["redis"].process_configs
     assert redis.autostart and groups["redis"].priority < groups["fleet"].priority
     assert redis.command.endswith(f"fleet.embedded_redis serve --socket {tmp_path / 'redis.sock'}")
+    assert f"--lock {tmp_path / 'proc' / 'redis.lock'}" in redis.command  # one Redis per var folder
     assert not any(program.autostart for program in groups["fleet"].process_configs)  # after the migration
 
 
@@ -72,10 +81,20 @@ def test_with_redis_url_set_no_embedded_redis_runs(tmp_path):
 
 def test_every_process_is_restarted_with_backoff_and_reads_its_ports_from_the_setup(tmp_path):
     programs_by_name = {p.name: p for p in _parsed(tmp_path, _setup(tmp_path))["fleet"].process_configs}
-    assert set(programs_by_name) == {"web", "worker", "control", "sim", "links", "scheduler"}
+    assert set(programs_by_name) == {"web", "worker", "control", "sim", "links", "scheduler", "hangwatch"}
     for program in programs_by_name.values():
         assert program.autorestart and program.startretries == START_RETRIES
         assert program.stdout_logfile == str(tmp_path / "log" / f"{program.name}.log")
+        # bounded logs (Django's go to these too); each process dies with the supervisor (fleet/procwrap.py)
+        assert program.stdout_logfile_maxbytes == LOG_BYTES and program.stdout_logfile_backups == LOG_BACKUPS
+        assert f"procwrap.py --parent-pidfile {tmp_path / 'supervisord.pid'}" in program.command
+    for name in ("links", "scheduler", "hangwatch"):  # one per var folder, always
+        assert f"--lock {tmp_path / 'proc' / name}.lock" in programs_by_name[name].command
+    for name in ("web", "worker", "control", "sim", "links", "scheduler"):  # watched by their heartbeat
+        assert programs_by_name[name].environment == {
+            "FLEET_HEARTBEAT": str(tmp_path / "proc" / f"{name}.beat")
+        }
+        assert f" {name}:" in programs_by_name["hangwatch"].command
     assert "--port 8123" in programs_by_name["web"].command
     assert "--port-base 9100" in programs_by_name["sim"].command
     assert "--port-base 9100" in programs_by_name["links"].command
@@ -163,6 +182,10 @@ def test_the_single_host_supervisord_config_restarts_every_role():
     assert set(programs_by_role) == ROLES
     for role, program in programs_by_role.items():
         assert program["autorestart"] == "true" and int(program["startretries"]) >= 100, role
+        assert program["stdout_logfile_maxbytes"] == "10MB" and int(program["stdout_logfile_backups"]) > 0, (
+            role
+        )
+    assert config["supervisord"]["logfile_maxbytes"] == "10MB"
 
 
 def test_the_simulator_takes_more_options_from_the_environment(tmp_path):

@@ -1,19 +1,24 @@
 """The step contract and the action registry: one vocabulary the interpreter emits and the executor accepts."""
 
 import pytest
-from django.utils.module_loading import import_string
 
-from fleetcore import actions, bindings, steps
+from execution.handlers import HANDLERS
+from fleetcore import actions, bindings, speed, steps
+from fleetcore.choice import ANY, RobotChoice
+from fleetcore.speed import SPEEDS, Limits
 from fleetcore.states import PRIORITY, State
-from fleetcore.steps import SPEEDS, Step, StepError
+from fleetcore.steps import Step, StepError
 
 
 def test_every_speed_word_the_interpreter_knows_the_executor_accepts():
-    from interpreter.lexicon import _SPEED_PHRASES
+    from fleetcore.grammar import SPEED_PHRASES
 
-    assert set(_SPEED_PHRASES) == set(SPEEDS)
-    factors = [steps.speed_factor(word) for word in ("very slow", "slow", "normal", "fast", "very fast")]
-    assert factors == sorted(factors) and factors[-1] == 1.0 and steps.speed_factor(None) == SPEEDS["normal"]
+    assert set(SPEED_PHRASES) == set(SPEEDS)
+    top = speed.Limits(0.5, 1.0)
+    paces = [speed.pace(word, top) for word in ("very slow", "slow", "normal", "fast", "very fast")]
+    assert [p.limits.linear for p in paces] == sorted(p.limits.linear for p in paces)
+    assert paces[-1].limits == top and paces[-1].stack_share is None  # full speed: a stack keeps its own
+    assert speed.pace(None, top) == speed.pace("normal", top)
 
 
 @pytest.mark.parametrize(
@@ -29,18 +34,19 @@ def test_every_speed_word_the_interpreter_knows_the_executor_accepts():
 def test_each_spoken_speed_parses_to_a_step_the_executor_takes(grammar, text, speed):
     from interpreter.parser import interpret
 
-    result = interpret(text, grammar).as_dict()
+    result = interpret(text, grammar).to_dict()
     (step,) = steps.validate(result["steps"])
-    assert (step.speed, step.action, step.robots) == (speed, "move", ("husky",))
-    assert 0 < step.factor <= 1
+    assert (step.speed, step.action, step.robots) == (speed, "move", RobotChoice.named("husky"))
+    assert 0 < step.pace(Limits(0.5, 1.0)).limits.linear <= 0.5
 
 
 def test_every_handler_of_the_registry_exists_and_every_role_it_needs_is_a_binding_role():
     for action in actions.ACTIONS.values():
         if action.handler is not None:
-            assert callable(import_string(action.handler)), action.name
+            assert callable(HANDLERS[action.handler]), action.name
         for group in action.needs:
             assert set(group) <= set(bindings.ROLES), action.name
+    assert set(HANDLERS) == {action.handler for action in actions.ACTIONS.values() if action.handler}
 
 
 def test_dock_is_motion_priority_and_a_query_never_outranks_motion():
@@ -71,9 +77,8 @@ def test_a_step_the_executor_cannot_run_is_refused_with_a_reason(step, error):
 
 def test_a_step_round_trips_and_names_no_robot_as_any():
     step = Step.from_dict({"action": "move", "destination": {"name": "A", "x": 1, "y": 2}, "speed": "fast"})
-    assert step.robots == steps.ANY
+    assert step.robots == RobotChoice(ANY) and step.robots.unnamed
     assert Step.from_dict(step.to_dict()) == step
-    assert step.for_robot("husky").robots == ("husky",)
 
 
 def test_the_seed_ontology_comes_from_the_registries():

@@ -5,14 +5,15 @@ import math
 
 import pytest
 
-from fleetcore import traffic
-from fleetcore.traffic import Capsule, Disc, ReservationTable, SpaceTimeSearch, cell_of
+from fleetcore import reservations, traffic
+from fleetcore.reservations import ReservationTable, cell_of, footprint_cells
+from fleetcore.traffic import Capsule, Disc, SpaceTimeSearch
 
 ROOM = (-3.0, 3.0)  # a 6 m x 6 m open room
 
 
 def open_room(cell):
-    x, y = traffic.center_of(cell)
+    x, y = reservations.center_of(cell)
     return ROOM[0] + 0.3 < x < ROOM[1] - 0.3 and ROOM[0] + 0.3 < y < ROOM[1] - 0.3
 
 
@@ -20,7 +21,7 @@ def conflicts(path, radius, table, robot, pad=0.0):
     """The other robots whose reservations this timed path overlaps (in space and time)."""
     found = set()
     for a, b in itertools.pairwise(path):
-        for cells, t0, t1 in traffic.leg_slots(a, b, radius, lambda t: pad):
+        for cells, t0, t1 in reservations.leg_slots(a, b, radius, lambda t: pad):
             who = table.holder(cells, t0, t1, robot)
             if who:
                 found.add(who)
@@ -94,7 +95,7 @@ def test_two_pairs_swapping_places_find_plans_with_no_overlap():
         "d": ((0.1, 2.0), (0.1, -2.0)),
     }
     for robot, (start, _) in tasks.items():
-        table.reserve(robot, traffic.footprint_cells(start, 0.15), 0.0, 1.0)  # standing at its start now
+        table.reserve(robot, footprint_cells(start, 0.15), 0.0, 1.0)  # standing at its start now
     for robot, (start, goal) in tasks.items():
         table.release(robot)
         plans[robot] = search().plan(start, goal, 0.0, table, robot, parked)
@@ -108,7 +109,7 @@ def test_two_pairs_swapping_places_find_plans_with_no_overlap():
 def test_a_robot_standing_is_gone_round_and_a_robot_parked_close_may_leave():
     standing = [(Capsule((0.1, 0.1), (0.1, 0.1), 0.3, "parked"), -math.inf)]
     path = search().plan((-2.0, 0.1), (2.0, 0.1), 0.0, ReservationTable(), "a", standing)
-    assert closest_approach(path, [(0.1, 0.1, 0.0)]) >= 0.3 + 0.15 - traffic.TRAFFIC_CELL / 2
+    assert closest_approach(path, [(0.1, 0.1, 0.0)]) >= 0.3 + 0.15 - reservations.TRAFFIC_CELL / 2
     squeezed = search().plan(
         (0.1, 0.45), (0.1, 2.0), 0.0, ReservationTable(), "b", standing
     )  # starts too close
@@ -118,7 +119,7 @@ def test_a_robot_standing_is_gone_round_and_a_robot_parked_close_may_leave():
 def test_nobody_parks_where_another_robot_will_pass():
     table = ReservationTable()
     goal = (0.1, 0.1)
-    table.reserve("a", traffic.footprint_cells(goal, 0.15), 20.0, 25.0)  # a passes the goal at t = 20..25
+    table.reserve("a", footprint_cells(goal, 0.15), 20.0, 25.0)  # a passes the goal at t = 20..25
     path = search().plan((-2.0, 0.1), goal, 0.0, table, "b")
     assert path is not None
     assert path[-1][2] >= 25.0  # b arrives after a has passed (alone it would be there by t = 5)
@@ -129,7 +130,7 @@ def test_reservations_far_ahead_are_heeded_all_the_way():
     others beyond a window let the order kept at run time go round), and is waited out in one state."""
     table = ReservationTable()
     goal = (0.1, 0.1)
-    table.reserve("a", traffic.footprint_cells(goal, 0.15), 35.0, 40.0)  # a passes the goal at t = 35..40
+    table.reserve("a", footprint_cells(goal, 0.15), 35.0, 40.0)  # a passes the goal at t = 35..40
     found = search()
     path = found.plan((-2.0, 0.1), goal, 0.0, table, "b")
     assert path is not None and path[-1][2] >= 40.0  # not there by t = 5 to stand in a's way at 35
@@ -153,7 +154,7 @@ def test_busy_intervals_agree_with_the_table():
 
 
 def test_an_unreachable_goal_has_no_plan():
-    walled = lambda c: open_room(c) and not (0.0 <= traffic.center_of(c)[0] <= 0.4)  # noqa: E731
+    walled = lambda c: open_room(c) and not (0.0 <= reservations.center_of(c)[0] <= 0.4)  # noqa: E731
     assert search(passable=walled).plan((-2.0, 0.1), (2.0, 0.1), 0.0, ReservationTable(), "a") is None
 
 
@@ -167,7 +168,7 @@ def test_wait_cycles_are_found_and_chains_are_not():
 
 
 def test_cells_cover_the_footprint():
-    cells = traffic.footprint_cells((0.1, 0.1), 0.25)
+    cells = footprint_cells((0.1, 0.1), 0.25)
     assert cell_of((0.1, 0.1)) in cells and cell_of((0.33, 0.1)) in cells and cell_of((0.6, 0.1)) not in cells
 
 
@@ -192,7 +193,7 @@ def test_a_wait_of_any_length_is_one_state_at_any_speed():
     for speed in (0.4, 2.0):
         for blocked in (30.0, 200.0):
             table = ReservationTable()  # another robot across the corridor, at x = 5 m, for `blocked` s
-            table.reserve("other", traffic.swept_cells((5.0, 0.0), (5.0, 3.0), 0.3), 0.0, blocked)
+            table.reserve("other", reservations.swept_cells((5.0, 0.0), (5.0, 3.0), 0.3), 0.0, blocked)
             search = SpaceTimeSearch(corridor, 0.2, speed, pad=lambda t: 0.5, max_expansions=10**6)
             path = search.plan((0.5, 1.5), (9.5, 1.5), 0.0, table, "me")
             assert path is not None and path[-1][:2] == (9.5, 1.5)
@@ -250,7 +251,7 @@ def test_the_cells_of_a_robot_off_its_cells_centre_cover_every_point_of_its_disc
     """A robot near a corner of its cell: every point of its disc lies in a cell counted (taken as a disc at
     the cell's centre, points up to 0.14 m beyond were missed, and plans passed nearer than their radii)."""
     for point in [(0.01, 0.01), (0.19, 0.02), (0.11, 0.18), (-0.37, 0.55)]:
-        cells = traffic.footprint_cells(point, 0.3)
+        cells = footprint_cells(point, 0.3)
         rim = [
             (point[0] + 0.2999 * math.cos(a), point[1] + 0.2999 * math.sin(a))
             for a in (i * math.tau / 360 for i in range(360))

@@ -25,7 +25,7 @@ def test_a_bad_answer_gets_an_example_about_the_word_asked(paper_world, operator
 def test_a_bare_word_answers_the_question_about_a_word(paper_world, operator):
     result = teach("move", operator, asked("zoom tiago to B"))
     assert result["ok"] and (result["word"], result["meaning"]) == ("zoom", "move")
-    assert interpret("zoom tiago to B")["valid"]
+    assert interpret("zoom tiago to B").to_dict()["valid"]
     assert Lesson.objects.get().word == "zoom"
 
 

@@ -8,7 +8,7 @@ from interpreter.parser import interpret
 
 
 def run(grammar, text):
-    result = interpret(text, grammar).as_dict()
+    result = interpret(text, grammar).to_dict()
     if result["valid"]:
         validate(result["steps"]) if result["steps"] else None  # the executor's contract accepts them
     return result
@@ -189,3 +189,26 @@ def test_an_unknown_verb_is_asked_about_with_the_verbs_a_person_types(grammar):
     known = question.split("I know: ", 1)[1].rstrip(").").split(", ")
     assert {"move", "rotate", "dock", "patrol", "wait", "stop"} <= set(known)
     assert not [verb for verb in known if "_" in verb]  # not move_by, report_status, list_free...
+
+
+@pytest.mark.parametrize(
+    ("text", "task", "read_back"),
+    [
+        ("rotate tiago 3 times", "rotate(3)", "rotate tiago 3 times"),
+        ("spin tiago twice", "rotate(2)", "rotate tiago 2 times"),
+        ("rotate tiago", "rotate(1)", "rotate tiago"),
+    ],
+)
+def test_a_task_said_n_times_is_one_step_read_back_with_its_count(grammar, text, task, read_back):
+    """Issue 31: "rotate tiago 3 times" is one rotate step done three times, said so (not "then rotate(3)")."""
+    result = run(grammar, text)
+    assert [(s["action"], s["robots"], s["task"]) for s in result["steps"]] == [("rotate", ["tiago"], task)]
+    assert result["read_back"] == [read_back]
+    assert f"Understood: {read_back}." in result["reason"]
+
+
+def test_a_task_after_a_move_is_read_back_as_what_follows_it(grammar):
+    result = run(grammar, "husky go to B and spin twice")
+    assert [(s["action"], s["task"]) for s in result["steps"]] == [("move", "rotate(2)")]
+    assert result["read_back"] == ["move husky to B, then rotate 2 times"]
+    assert run(grammar, "go to A")["read_back"] == ["move a robot the portal chooses to A"]

@@ -10,11 +10,11 @@ from .acceptance import rows, summary
 @pytest.mark.parametrize("row", rows(), ids=lambda r: r["text"])
 def test_acceptance_row(grammar, row):
     expected = {k: v for k, v in row.items() if k != "text"}
-    assert summary(interpret(row["text"], grammar).as_dict()) == expected
+    assert summary(interpret(row["text"], grammar).to_dict()) == expected
 
 
 def run(grammar, text):
-    return interpret(text, grammar).as_dict()
+    return interpret(text, grammar).to_dict()
 
 
 @pytest.mark.parametrize(
@@ -161,7 +161,7 @@ def test_every_registered_name_is_understood(name):
     grammar = Grammar(
         Lexicon(seed_terms()), Fleet([*fleet.robots, RobotInfo(name, "husky", "wheeled")], fleet.places)
     )
-    result = interpret(f"move {name} to A", grammar).as_dict()
+    result = interpret(f"move {name} to A", grammar).to_dict()
     assert result["type"] == "I", result["question"]
     assert result["steps"][0]["robots"] == [name]
 

@@ -131,8 +131,32 @@ def browser(monkeypatch):
 
     with sync_playwright() as playwright:
         chromium = playwright.chromium.launch(executable_path=path, args=CHROMIUM_ARGS)
+        violations = _watch_csp(chromium)
         yield chromium
         chromium.close()
+    assert not violations, f"Content-Security-Policy violations: {violations}"
+
+
+# Every page of every browser test reports what the Content-Security-Policy refused (the event fires in the page;
+# the binding carries it out across navigations); the browser fixture fails the test on any.
+CSP_LISTENER = """document.addEventListener("securitypolicyviolation", (e) => window.__cspViolation(
+  `${e.violatedDirective} blocked ${e.blockedURI || "inline"} at ${e.sourceFile || e.documentURI}:${e.lineNumber}`));"""
+
+
+def _watch_csp(chromium) -> list[str]:
+    """Patch the browser's new_context so that each context reports CSP violations into the returned list."""
+    violations: list[str] = []
+    new_context = chromium.new_context
+
+    def watched(**options):
+        context = new_context(**options)
+        context.expose_binding("__cspViolation", lambda _source, words: violations.append(words))
+        context.add_init_script(CSP_LISTENER)
+        return context
+
+    chromium.new_context = watched
+    chromium.csp_violations = violations  # a test that makes one on purpose clears it
+    return violations
 
 
 @pytest.fixture
@@ -208,9 +232,9 @@ def recorded_control(monkeypatch):
         GRANT_S = real.GRANT_S
 
         @staticmethod
-        def stop(robots, user):
+        def stop(robots, user, **kwargs):
             calls.append(("stop", user.username))
-            return {robot.name: "stopped" for robot in robots}
+            return {getattr(robot, "name", robot): "stopped" for robot in robots}
 
         @staticmethod
         def teleop_with(grant, user, linear, angular):
@@ -226,6 +250,10 @@ def recorded_control(monkeypatch):
         def audit_teleops(user, batch):
             return None
 
+    fast_stop = importlib.import_module("execution.fast_stop")
+    monkeypatch.setattr(
+        fast_stop, "stop_blocking", lambda *args, **kwargs: calls.append(("zeros", args)) or 0
+    )
     monkeypatch.setitem(sys.modules, "execution.control", Control)
     monkeypatch.setattr(execution, "control", Control, raising=False)
     return calls

@@ -59,3 +59,27 @@ def test_the_answer_box_example_fits_the_question(login, operator, fleet, no_run
     answer = page.locator("input.answer")
     answer.wait_for()
     assert answer.get_attribute("placeholder") == example
+
+
+def test_the_parse_line_of_a_step_naming_no_robot_says_the_portal_chooses_and_the_answer_whom(
+    login, operator, fleet, no_runner
+):
+    """Not "rotate any" (issue 31): the parse line says the portal chooses, the answer whom and why."""
+    from execution.models import TimeSlot
+    from robots.models import Binding
+
+    Binding.objects.filter(robot=fleet["turtlebot"], action="odometry").update(
+        target="/odom", needs_user=False
+    )
+    TimeSlot.objects.all().delete()  # the turtlebot is free and can do it: it is chosen
+    page = login(operator)
+    page.wait_for_selector("#conn[data-state=live]")
+    type_instruction(page, "spin around")
+    page.wait_for_function("() => document.querySelector('#progress li') !== null")
+    line = page.locator(".steps li").first.text_content()
+    assert line.startswith("rotate a robot the portal chooses") and " any " not in line
+    assert list(Instruction.objects.get(text="spin around").robots.values_list("name", flat=True)) == [
+        "turtlebot"
+    ]
+    answer = page.locator("#progress li").first.text_content()
+    assert "turtlebot chosen (no robot named): the only free robot that can do it" in answer

@@ -109,3 +109,26 @@ async def test_a_socket_takes_commands_while_joining_the_poses_group_hangs(viewe
     reply = await dashboard.receive_json_from(timeout=5)  # the socket's commands did not wait for the poses
     assert reply["type"] == "command.result" and reply["ref"] == 9
     await asyncio.wait_for(dashboard.disconnect(), fanout.PoseFanout.LEAVE_S + 3)
+
+
+async def test_a_tick_is_strict_json_and_a_pose_with_nan_is_left_out_not_the_tick():
+    """allow_nan=False: a bare NaN would make JSON.parse throw in every browser and freeze every map."""
+    hub = fanout.PoseFanout(layer=None)
+    socket = Socket()
+    hub.sockets[socket] = fanout._Socket(socket, None)
+    hub.deliver([pose(1, 0.5), pose(2, float("nan")), pose(3, float("inf"))])
+    await asyncio.sleep(0.01)
+    text = fanout.encode([pose(1, 0.5), pose(2, float("nan"))])
+    assert "NaN" not in text and json.loads(text, parse_constant=pytest.fail)["poses"] == [pose(1, 0.5)]
+    assert [message["poses"] for message in socket.sent] == [[pose(1, 0.5)]]
+
+
+async def test_the_page_sockets_and_the_api_refuse_to_write_nan():
+    from portal.api import api
+    from portal.consumers import AlertsConsumer, FleetConsumer
+
+    for consumer in (FleetConsumer, AlertsConsumer):
+        with pytest.raises(ValueError, match="JSON compliant"):
+            await consumer.encode_json({"x": float("nan")})
+    with pytest.raises(ValueError, match="JSON compliant"):
+        api.renderer.render(None, {"x": float("inf")}, response_status=200)

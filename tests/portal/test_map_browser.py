@@ -159,3 +159,33 @@ def test_two_fingers_pinch_to_zoom(login, operator, fleet):
         touch("touchMove", spread)
     touch("touchEnd", 0)
     page.wait_for_function("(s) => window.fleet.map.scale > 2.5 * s", arg=before)
+
+
+NEAREST = """(rows) => {
+  const map = window.fleet.map, m = map.map;
+  const [cx, cy] = [m.origin[0] + m.width * m.resolution / 2, m.origin[1] + m.height * m.resolution / 2];
+  const step = 70 * map.ratio / map.scale; // robots 70 css px apart: a label is about as wide
+  const robots = [];
+  rows.forEach((row, j) => row.forEach((state, i) => robots.push(
+    { id: 2000 + robots.length, name: `r${j}${i}`, state, start_pose: [cx + (i - 2) * step, cy - j * step, 0] })));
+  map.setRobots(robots);
+  map.draw();
+  const centre = (name) => { const r = [...map.robots.values()].find((x) => x.name === name); return map.toScreen(...map.where(r)); };
+  const distance = ([x, y, w, h], [px, py]) => Math.hypot(Math.max(x - px, 0, px - x - w), Math.max(y - py, 0, py - y - h));
+  return map.labels.map((label) => {
+    const nearest = robots.map((r) => [distance(label.box, centre(r.name)), r.name]).sort((a, b) => a[0] - b[0])[0][1];
+    return [label.name, nearest];
+  });
+}"""
+
+
+def test_in_a_crowd_each_label_sits_nearer_its_own_robot_than_any_other(login, operator, fleet):
+    page = login(operator)
+    _live(page)
+    rows = [
+        ["ready", "motion", "ready", "registered", "ready"],
+        ["ready", "ready", "motion", "ready", "ready"],
+    ]
+    placed = page.evaluate(NEAREST, rows)
+    assert len(placed) == 10  # every robot named
+    assert [name for name, nearest in placed if name != nearest] == []  # each label reads as its own robot's

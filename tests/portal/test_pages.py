@@ -161,3 +161,11 @@ def test_robot_page_names_its_camera_and_scan_topics(client_for, viewer, fleet):
     assert "laser scan <code>/scan</code>" in page
     plain = client_for(viewer).get(reverse("robot-detail", args=[fleet["husky"].pk])).content.decode()
     assert 'id="camera"' not in plain
+
+
+def test_every_page_links_to_recordings_in_the_navigation(client_for, viewer, fleet):
+    client = client_for(viewer)
+    for path in ("/", "/robots/", "/history/", "/experiments/", "/recordings/"):
+        nav = client.get(path).content.decode().split('<nav aria-label="Main">')[1].split("</nav>")[0]
+        assert 'href="/recordings/"' in nav, path
+    assert 'href="/recordings/" aria-current="page"' in client.get("/recordings/").content.decode()

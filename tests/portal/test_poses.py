@@ -1,6 +1,7 @@
 """Pose streaming: odometry + start pose = map pose, amcl corrects the offset, one batch per tick."""
 
 import asyncio
+import itertools
 import json
 import math
 
@@ -57,7 +58,7 @@ def test_bursts_coalesce_to_the_latest_pose_once_per_tick():
 
 
 def test_amcl_corrects_the_offset_for_later_odometry():
-    hub = PoseHub(publish=Sink())
+    hub = PoseHub(publish=Sink(), clock=itertools.count(0.0, 1.0).__next__)  # 1 m in 2 s: no jump
     hub.track(1, [0.0, 0.0, 0.0])
     hub.on_odometry(1, odometry(1.0, 0.0, 0.0))
     hub.on_amcl(1, {"pose": {"pose": {"position": {"x": 3.0, "y": 3.0}, "orientation": {"z": 0, "w": 1}}}})
@@ -72,6 +73,7 @@ def test_unreadable_messages_are_dropped_not_raised():
     class Robot:
         pk = 3
         start_pose = []
+        max_linear = 1.0
 
         class bindings:
             @staticmethod
@@ -150,3 +152,52 @@ def test_battery_and_round_trip_ride_along_with_each_pose():
     assert pose["battery"] == 87.0 and pose["x"] == 0.0
     hub.on_odometry(2, odometry(1, 0, 0))
     assert hub.take_batch()[0]["rtt"] == 12.3
+
+
+def test_odometry_with_nan_flags_the_last_good_pose_and_reports_it_once():
+    reported = []
+    clock = itertools.count(100.0, 0.1)
+    hub = PoseHub(publish=Sink(), clock=clock.__next__, report=reported.append)
+    hub.track(1, [0.0, 0.0, 0.0], max_linear=1.0)
+    hub.on_odometry(1, odometry(1.0, 0.0, 0.0))
+    hub.on_odometry(2, odometry(0.0, 0.0, 0.0))
+    asyncio.run(hub.flush())
+    for _ in range(3):
+        hub.on_odometry(1, odometry(math.nan, 0.0, 0.0))
+        hub.on_odometry(2, odometry(0.0, 0.0, 0.0))
+    [flagged, other] = hub.take_batch()
+    assert (flagged["x"], flagged["fault"]) == (1.0, "x is NaN")  # the last good pose, never the NaN
+    assert flagged["fault_since"] == pytest.approx(100.2) and "fault" not in other
+    json.dumps([flagged, other], allow_nan=False)  # no number in it is NaN: this would raise
+    asyncio.run(hub.flush())
+    assert reported == [{1: ("x is NaN", pytest.approx(100.2))}]  # one report, not one per message
+
+    hub.on_odometry(1, odometry(1.0, 0.0, 0.0))
+    [pose] = hub.take_batch()
+    assert "fault" not in pose
+    asyncio.run(hub.flush())
+    assert reported[-1] == {1: (None, None)}
+
+
+def test_an_amcl_pose_does_not_clear_a_refused_odometry_flag():
+    """amcl rides on the odometry: while the gate refuses it the flagged last good pose stands (a 1 Hz amcl pose
+    once made "how far is robot2 from A" answer from a pose the portal had just called invalid)."""
+    hub = PoseHub(publish=Sink(), clock=itertools.count(100.0, 0.1).__next__, report=lambda changes: None)
+    hub.track(1, [0.0, 0.0, 0.0], max_linear=1.0)
+    hub.on_odometry(1, odometry(1.0, 0.0, 0.0))
+    hub.on_odometry(1, odometry(math.nan, 0.0, 0.0))
+    hub.on_amcl(1, {"pose": {"pose": {"position": {"x": 3.0, "y": 3.0}, "orientation": {"z": 0, "w": 1}}}})
+    [pose] = hub.take_batch()
+    assert (pose["x"], pose["fault"]) == (1.0, "x is NaN")
+    hub.on_odometry(1, odometry(1.05, 0.0, 0.0))  # good again: it lands where amcl put the robot
+    [pose] = hub.take_batch()
+    assert "fault" not in pose and (pose["x"], pose["y"]) == pytest.approx((3.05, 3.0))
+
+
+def test_a_pose_jumping_faster_than_the_robot_is_refused():
+    hub = PoseHub(publish=Sink(), clock=itertools.count(100.0, 0.1).__next__, report=lambda changes: None)
+    hub.track(1, [0.0, 0.0, 0.0], max_linear=1.0)
+    hub.on_odometry(1, odometry(0.0, 0.0, 0.0))
+    hub.on_odometry(1, odometry(1000.0, 0.0, 0.0))
+    [pose] = hub.take_batch()
+    assert pose["x"] == 0.0 and pose["fault"].startswith("jumped 1000.0 m")

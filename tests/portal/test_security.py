@@ -60,13 +60,92 @@ def test_thirty_wrong_passwords_are_refused_after_a_few(client, fleet_admin, set
     limit = settings.AXES_FAILURE_LIMIT
     assert answers[: limit - 1] == [200] * (limit - 1)  # the form again, "didn't match"
     assert answers[limit:] == [429] * (30 - limit)  # locked out
-    # even the right password is refused from that address for the cool-off ...
+    # even the right password is refused for the cool-off, from this address and from any other
     assert client.post(login_url, {"username": fleet_admin.username, "password": PASSWORD}).status_code == 429
-    # ... while the admin logs in from another one: nobody can lock the admin out from elsewhere
     elsewhere = client.post(
         login_url, {"username": fleet_admin.username, "password": PASSWORD}, REMOTE_ADDR="10.1.2.3"
     )
+    assert elsewhere.status_code == 429
+
+
+def _guess(client, username: str, i: int, **meta) -> int:
+    return client.post("/login/", {"username": username, "password": f"wrong-{i}"}, **meta).status_code
+
+
+def test_rotating_x_forwarded_for_from_an_untrusted_peer_is_throttled(client, fleet_admin, settings):
+    assert settings.FLEET_TRUSTED_PROXIES == []  # the default: nobody's X-Forwarded-For is believed
+    answers = [
+        _guess(client, fleet_admin.username, i, HTTP_X_FORWARDED_FOR=f"203.0.113.{i}") for i in range(10)
+    ]
+    limit = settings.AXES_FAILURE_LIMIT
+    assert answers[limit:] == [429] * (10 - limit)
+    # a locked account cannot log in with a new X-Forwarded-For either
+    fresh = client.post(
+        "/login/",
+        {"username": fleet_admin.username, "password": PASSWORD},
+        HTTP_X_FORWARDED_FOR="198.51.100.77",
+    )
+    assert fresh.status_code == 429
+
+
+def test_a_locked_account_stays_locked_behind_a_trusted_proxy(client, fleet_admin, settings):
+    settings.FLEET_TRUSTED_PROXIES = ["10.77.0.10"]
+    proxied = {"REMOTE_ADDR": "10.77.0.10"}
+    for i in range(settings.AXES_FAILURE_LIMIT):  # each guess from a client of its own, as the proxy says
+        _guess(client, fleet_admin.username, i, HTTP_X_FORWARDED_FOR=f"203.0.113.{i}", **proxied)
+    fresh = client.post(
+        "/login/",
+        {"username": fleet_admin.username, "password": PASSWORD},
+        HTTP_X_FORWARDED_FOR="198.51.100.77",
+        **proxied,
+    )
+    assert fresh.status_code == 429
+
+
+def test_thirty_usernames_from_one_address_are_throttled(client, viewer, settings):
+    answers = [_guess(client, f"someone{i}", i) for i in range(30)]
+    limit = settings.AXES_FAILURE_LIMIT
+    assert answers[limit:] == [429] * (30 - limit)
+    # the address is locked, even for a real account with its right password ...
+    assert client.post("/login/", {"username": viewer.username, "password": PASSWORD}).status_code == 429
+    # ... while that account logs in from another address
+    elsewhere = client.post(
+        "/login/", {"username": viewer.username, "password": PASSWORD}, REMOTE_ADDR="10.1.2.3"
+    )
     assert elsewhere.status_code == 302
+
+
+def test_the_client_address_is_the_peer_unless_the_peer_is_a_trusted_proxy(rf, settings):
+    from portal.clientaddr import client_address
+
+    def seen(peer: str, forwarded: str | None = None) -> str:
+        meta = {"REMOTE_ADDR": peer} | ({"HTTP_X_FORWARDED_FOR": forwarded} if forwarded else {})
+        return client_address(rf.post("/login/", **meta))
+
+    settings.FLEET_TRUSTED_PROXIES = []
+    assert seen("198.51.100.1", "203.0.113.9") == "198.51.100.1"
+    settings.FLEET_TRUSTED_PROXIES = ["10.77.0.0/24"]
+    assert seen("198.51.100.1", "203.0.113.9") == "198.51.100.1"  # not a proxy of ours: its header is ignored
+    assert seen("10.77.0.10", "203.0.113.9") == "203.0.113.9"
+    # read from the right: what the client put in front of the proxy's own entry is never believed
+    assert seen("10.77.0.10", "1.2.3.4, 203.0.113.9") == "203.0.113.9"
+    assert seen("10.77.0.10", "203.0.113.9, 10.77.0.11") == "203.0.113.9"  # through two proxies of ours
+    assert seen("10.77.0.10", "not-an-address") == "10.77.0.10"
+    assert seen("10.77.0.10") == "10.77.0.10"
+
+
+def test_web_servers_never_rewrite_the_peer_from_forwarded_headers(tmp_path):
+    from fleet.run import Setup, programs
+
+    (web,) = [p for p in programs(Setup.from_env({"FLEET_VAR_DIR": str(tmp_path)})) if p.name == "web"]
+    assert "--no-proxy-headers" in web.command  # uvicorn's default trusts 127.0.0.1's X-Forwarded-For
+    for unit in ("deploy/systemd/fleet-web.service", "deploy/supervisord.conf"):
+        text = (BASE_DIR / unit).read_text()
+        assert "--no-proxy-headers" in text and "--proxy-headers" not in text.replace(
+            "--no-proxy-headers", ""
+        )
+    nginx = (BASE_DIR / "deploy/nginx/fleet.conf").read_text()
+    assert "$proxy_add_x_forwarded_for" not in nginx and "X-Forwarded-For $remote_addr" in nginx
 
 
 def test_a_session_ends_after_a_working_day(client, viewer, settings):
@@ -208,3 +287,13 @@ def test_a_goal_dragged_on_the_map_keeps_its_heading(client_for, operator, fleet
     bad = {"robot_ids": [fleet["turtlebot"].pk], "destination": {"x": 0.5, "y": 0.4, "yaw": 99}}
     reply = client_for(operator).post("/api/instructions", bad, content_type="application/json")
     assert reply.status_code == 422 and "yaw" in str(reply.json()["detail"])
+
+
+def test_a_refused_request_is_logged_in_one_line(client_for, viewer, caplog):
+    client = client_for(viewer)
+    with caplog.at_level("WARNING", logger="django.request"):
+        assert client.get("/audit/").status_code == 403
+    (record,) = [r for r in caplog.records if r.name == "django.request"]
+    assert record.exc_info is None and record.exc_text is None  # no traceback
+    line = caplog.handler.format(record)
+    assert "\n" not in line and "/audit/" in line and viewer.username in line  # the path and the reason

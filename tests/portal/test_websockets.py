@@ -192,9 +192,10 @@ async def _teleop(communicator, robot, linear):
 
 
 async def test_a_lease_taken_by_someone_else_stops_a_held_teleop_at_once(
-    operator, second_operator, fleet, published
+    operator, fleet_admin, fleet, published
 ):
-    """Repeats publish under the press's grant; the lease push drops it, so the next repeat is refused."""
+    """Repeats publish under the press's grant; the lease push drops it, so the next repeat is refused (the
+    driver holds the lease from the first press: only an admin takes it over)."""
     turtlebot = fleet["turtlebot"]
     communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
     await communicator.receive_json_from(timeout=5)
@@ -202,18 +203,16 @@ async def test_a_lease_taken_by_someone_else_stops_a_held_teleop_at_once(
     assert (await _teleop(communicator, turtlebot, 5.0))[
         "detail"
     ] == "turtlebot: linear 0.22 m/s, angular 0.00 rad/s"
-    await sync_to_async(leases.take)(second_operator, turtlebot)
+    await sync_to_async(leases.take)(fleet_admin, turtlebot)
     while (await communicator.receive_json_from(timeout=5)).get("type") != "lease.update":
         pass
     refused = await _teleop(communicator, turtlebot, 0.1)
-    assert refused["ok"] is False and "held by olga" in refused["detail"]
+    assert refused["ok"] is False and "held by ada" in refused["detail"]
     assert published == [("/cmd_vel", 0.1), ("/cmd_vel", 0.22)]
     await communicator.disconnect()
 
 
-async def test_a_held_teleop_is_rechecked_while_held(
-    operator, second_operator, fleet, published, monkeypatch
-):
+async def test_a_held_teleop_is_rechecked_while_held(operator, fleet_admin, fleet, published, monkeypatch):
     """Without any push (a lost message), the periodic re-check still finds the lease and says so."""
     from execution import control
 
@@ -223,14 +222,34 @@ async def test_a_held_teleop_is_rechecked_while_held(
     communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
     await communicator.receive_json_from(timeout=5)
     assert (await _teleop(communicator, turtlebot, 0.1))["ok"] is True
-    await sync_to_async(leases.take)(second_operator, turtlebot)
+    await sync_to_async(leases.take)(fleet_admin, turtlebot)
     assert (await _teleop(communicator, turtlebot, 0.1))["ok"] is True  # the grant still stands
     said = await communicator.receive_json_from(timeout=5)  # the re-check, 0.2 s later
-    assert said["ok"] is False and said["ref"] is None and "held by olga" in said["detail"]
+    assert said["ok"] is False and said["ref"] is None and "held by ada" in said["detail"]
     refused = await _teleop(communicator, turtlebot, 0.1)
-    assert refused["ok"] is False and "held by olga" in refused["detail"]
+    assert refused["ok"] is False and "held by ada" in refused["detail"]
     assert published == [("/cmd_vel", 0.1), ("/cmd_vel", 0.1)]
     await communicator.disconnect()
+
+
+async def test_teleop_of_a_free_robot_takes_its_lease_for_the_driver(
+    operator, second_operator, fleet, published
+):
+    """Driving needs the lease: the first press takes a free robot's (shown on every page); another operator's
+    teleop is then refused."""
+    turtlebot = fleet["turtlebot"]
+    assert await sync_to_async(leases.holder)(turtlebot) is None
+    communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", operator)
+    await communicator.receive_json_from(timeout=5)
+    assert (await _teleop(communicator, turtlebot, 0.1))["ok"] is True
+    assert await sync_to_async(leases.holder)(turtlebot) == operator
+    other = await _connect(f"/ws/robots/{turtlebot.pk}/", second_operator)
+    await other.receive_json_from(timeout=5)
+    refused = await _teleop(other, turtlebot, 0.1)
+    assert refused["ok"] is False and "held by otto" in refused["detail"]
+    assert published == [("/cmd_vel", 0.1)]
+    await communicator.disconnect()
+    await other.disconnect()
 
 
 async def test_held_teleop_audits_changes_not_repeats(operator, fleet, published):
@@ -323,6 +342,40 @@ async def test_a_typed_stop_over_the_socket_publishes_zero_before_the_instructio
     assert reply["ok"] is True and reply["ref"] == "t1", reply
     assert reply["instruction"]["text"] == "stop turtlebot" and reply["instruction"]["status"] == "succeeded"
     assert recorded[0] == ("published", "/cmd_vel", 0.0) and ("control.stop", ["turtlebot"]) in recorded
+    await communicator.disconnect()
+
+
+async def test_typed_text_is_parsed_once_on_its_way_from_the_socket_to_submit(
+    operator, fleet, recorded, seeded_ontology, monkeypatch
+):
+    """The socket reads the text once (for a stop's head start) and submit takes that reading: a stop and a
+    question each parsed one time, the stop's robots looked up one time (execution.instructions.Reading), the
+    stop still decided before anything is stored."""
+    from execution import fast_stop
+    from fleetcore.interpretation import Interpretation
+    from interpreter import service
+
+    parsed, parse = [], service.parse
+    monkeypatch.setattr(service, "parse", lambda text, grammar: parsed.append(text) or parse(text, grammar))
+    looked_up, stop_names = [], Interpretation.stop_names
+    monkeypatch.setattr(
+        Interpretation,
+        "stop_names",
+        lambda self, fleet: looked_up.append(self.steps) or stop_names(self, fleet),
+    )
+    communicator = await _connect("/ws/fleet/", operator)
+    await communicator.receive_json_from(timeout=5)
+    await fast_stop.TARGETS._load()
+    await sync_to_async(service.store().get_grammar)()  # the grammar a running web process has
+    for ref, text in (("s", "stop turtlebot"), ("q", "where is turtlebot")):
+        await communicator.send_json_to({"command": "instruct", "text": text, "ref": ref})
+        reply = await communicator.receive_json_from(timeout=10)
+        while reply.get("type") != "command.result":
+            reply = await communicator.receive_json_from(timeout=10)
+        assert reply["ok"] is True and reply["instruction"]["status"] == "succeeded", reply
+    assert parsed == ["stop turtlebot", "where is turtlebot"]
+    assert [[step["action"] for step in steps] for steps in looked_up] == [["stop"]]
+    assert recorded[0] == ("published", "/cmd_vel", 0.0)
     await communicator.disconnect()
 
 

@@ -156,3 +156,28 @@ def test_the_page_starts_a_recording_and_serves_it(
         and b"".join(download.streaming_content)[1:5] == b"MCAP"
     )
     assert client.post("/recordings/", {"seconds": "2"}).status_code == 403  # viewers only watch
+
+
+def test_a_replay_at_its_start_shows_every_robots_pose(fleet, tmp_path):
+    """The husky stands still (its pose comes later, or not at all in the recording's seconds): the recording
+    starts with every robot's last pose, so at t = 0 the replay shows both robots, not only the first to move."""
+    from django.core.cache import cache
+
+    from robots.poses import store_poses
+
+    turtlebot, husky = fleet["turtlebot"], fleet["husky"]
+    store_poses([{"id": husky.pk, "x": 2.0, "y": 1.0, "yaw": 1.57, "t": time.time()}])
+    try:
+        pushes = [p for p in _pushes(fleet) if p[0] == live.POSES_GROUP]
+        for _, tick in pushes:  # taken after the recording began, as the links process's poses are
+            tick["poses"] = [{**p, "t": p["t"] + 1.0} for p in tick["poses"] if p["id"] == turtlebot.pk]
+        pushes.append((live.POSES_GROUP, live.poses([{"id": turtlebot.pk, "fault": "x is NaN"}])))
+        path = tmp_path / "start.mcap"
+        _record_while_pushing(path, pushes)
+    finally:
+        cache.delete_many([live.POSE_CACHE_KEY.format(id=robot.pk) for robot in fleet.values()])
+    frames = replay_frames(path)
+    assert frames["robots"]["husky"][0][1:3] == pytest.approx([2.0, 1.0])
+    first = {name: poses[0][0] for name, poses in frames["robots"].items()}
+    assert first["husky"] <= first["turtlebot"]  # there from the first instant
+    assert len(frames["robots"]["turtlebot"]) == 5  # a pose refused at the gate (no place) is not recorded

@@ -332,3 +332,37 @@ class HostileEndpoint:
 def _service(key: str) -> str:
     """Keyword arguments name rosapi services without the prefix: nodes= is /rosapi/nodes."""
     return key if key.startswith("/") else f"/rosapi/{key}"
+
+
+def nav2_robot(graph: Graph, ns: str, name: str, cmd_vel: str = "cmd_vel", odom: str = "odom") -> None:
+    """A ROS 2 robot of another maker with nav2 humble as its bringup shows it: the base driver, the navigation
+    actions (hidden /_action/ topics and services), /goal_pose, the controller's speed_limit, the velocity
+    smoother feeding the base, /diagnostics and /battery_state. Names relative to the robot's namespace."""
+    graph.add_subscriber(f"{ns}/base_driver", f"{ns}/{cmd_vel}", "geometry_msgs/msg/Twist")
+    graph.add_publisher(f"{ns}/base_driver", f"{ns}/{odom}", "nav_msgs/msg/Odometry")
+    graph.add_publisher(f"{ns}/base_driver", f"{ns}/battery_state", "sensor_msgs/msg/BatteryState")
+    graph.add_publisher(f"{ns}/base_driver", "/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    graph.add_publisher(f"{ns}/lidar", f"{ns}/scan", "sensor_msgs/msg/LaserScan")
+    bt = f"{ns}/bt_navigator"
+    for action, kind in (
+        ("navigate_to_pose", "NavigateToPose"),
+        ("navigate_through_poses", "NavigateThroughPoses"),
+    ):
+        act, type_ = f"{ns}/{action}/_action", f"nav2_msgs/action/{kind}"
+        graph.add_publisher(bt, f"{act}/feedback", f"{type_}_FeedbackMessage")
+        graph.add_publisher(bt, f"{act}/status", "action_msgs/msg/GoalStatusArray")
+        graph.add_service(bt, f"{act}/send_goal", f"{type_}_SendGoal")
+        graph.add_service(bt, f"{act}/cancel_goal", "action_msgs/srv/CancelGoal")
+        graph.add_service(bt, f"{act}/get_result", f"{type_}_GetResult")
+    graph.add_subscriber(bt, f"{ns}/goal_pose", "geometry_msgs/msg/PoseStamped")
+    graph.add_subscriber(f"{ns}/controller_server", f"{ns}/{odom}", "nav_msgs/msg/Odometry")
+    graph.add_subscriber(f"{ns}/controller_server", f"{ns}/speed_limit", "nav2_msgs/msg/SpeedLimit")
+    graph.add_publisher(f"{ns}/controller_server", f"{ns}/cmd_vel_nav", "geometry_msgs/msg/Twist")
+    graph.add_subscriber(f"{ns}/velocity_smoother", f"{ns}/cmd_vel_nav", "geometry_msgs/msg/Twist")
+    graph.add_publisher(f"{ns}/velocity_smoother", f"{ns}/{cmd_vel}", "geometry_msgs/msg/Twist")
+    graph.add_publisher(
+        f"{ns}/lifecycle_manager_navigation", "/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"
+    )
+    urdf = f'<robot name="{name}"><link name="base_link"/></robot>'
+    graph.params[f"{ns}/robot_state_publisher:robot_description"] = urdf
+    graph.node(f"{ns}/robot_state_publisher")

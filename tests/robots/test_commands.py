@@ -2,7 +2,7 @@
 
 import pytest
 
-from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, CommandSurface, NoMoveTopic, surfaces
+from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, Call, CommandSurface, NoMoveTopic, surfaces
 from robots.models import Binding, Robot
 
 pytestmark = pytest.mark.django_db
@@ -46,7 +46,11 @@ def test_a_ros2_robot_speaks_twist_stamped_and_takes_nav2_goals_and_docks():
     assert message["twist"]["linear"]["x"] == 0.3 and message["twist"]["angular"]["z"] == -0.1
     assert message["header"]["stamp"] == {"sec": 1, "nanosec": 500_000_000}
     assert surface.nav_kind == NAV_NAV2 and surface.nav_namespace == "/navigate_to_pose"
-    assert len(surface.zero()) == 1  # nav2 goals are cancelled by their action client, not by a topic
+    _zero, cancel = surface.zero()  # every goal of the action, whoever sent it: a zero goal id and stamp
+    assert cancel == Call(
+        "/navigate_to_pose/_action/cancel_goal",
+        {"goal_info": {"goal_id": {"uuid": [0] * 16}, "stamp": {"sec": 0, "nanosec": 0}}},
+    )
     assert surface.can_dock and surface.dock_namespace == "/dock"
 
 
@@ -55,6 +59,16 @@ def test_a_pose_stamped_goal_topic_and_a_robot_without_a_move_topic():
     surface = CommandSurface.of(simple)
     assert surface.nav_kind == NAV_SIMPLE
     assert surface.simple_goal(1.0, 0.0, 0.0, 0.0)[0] == "/r3/goal"
+    moving = CommandSurface.of(
+        robot_with(
+            "r4",
+            1,
+            move=("/r4/cmd_vel", "geometry_msgs/Twist"),
+            navigate=("/r4/goal", "geometry_msgs/PoseStamped"),
+        )
+    )
+    _zero, (topic, goal, _type) = moving.zero(here=(1.5, -2.0, 0.0))  # no cancel: a goal where it stands
+    assert topic == "/r4/goal" and goal["pose"]["position"] == {"x": 1.5, "y": -2.0, "z": 0.0}
     assert not surface.can_move
     with pytest.raises(NoMoveTopic, match="r3: no move topic is bound"):
         surface.zero()
@@ -66,3 +80,86 @@ def test_surfaces_reads_every_robot_in_two_queries(django_assert_num_queries):
     with django_assert_num_queries(2):
         found = surfaces(Robot.objects.prefetch_related("bindings"))
     assert sorted(s.move_topic for s in found.values()) == [f"/q{i}/cmd_vel" for i in range(5)]
+
+
+def test_speed_limits_nav2_in_percent_and_move_base_through_its_planners_max_vel_x():
+    nav2 = robot_with(
+        "n2",
+        2,
+        move=("/cmd_vel", "geometry_msgs/msg/Twist"),
+        navigate=("/navigate_to_pose", "nav2_msgs/action/NavigateToPose"),
+        speed_limit=("/speed_limit", "nav2_msgs/msg/SpeedLimit"),
+    )
+    surface = CommandSurface.of(nav2)
+    assert surface.can_limit_speed and surface.read_speed() is None
+    topic, message, type_ = surface.speed_limit(0.35, t=2.0)
+    assert (topic, type_, message["percentage"], message["speed_limit"]) == (
+        "/speed_limit",
+        "nav2_msgs/msg/SpeedLimit",
+        True,
+        35.0,
+    )
+    assert surface.speed_limit(None)[1]["speed_limit"] == 0.0  # 0: no limit, as SpeedLimit.msg says
+    mb = robot_with(
+        "mb",
+        1,
+        move=("/cmd_vel", "geometry_msgs/Twist"),
+        navigate=("/move_base", "move_base_msgs/MoveBaseAction"),
+    )
+    Binding.objects.filter(robot=mb, action="speed_limit").delete()
+    Binding.objects.create(
+        robot=mb,
+        action="speed_limit",
+        kind="service",
+        target="/move_base/DWAPlannerROS/set_parameters",
+        message_type="dynamic_reconfigure/Reconfigure",
+    )
+    surface = CommandSurface.of(mb)
+    call = surface.speed_limit(0.5, top=0.5)
+    assert call == Call(
+        "/move_base/DWAPlannerROS/set_parameters",
+        {"config": {"doubles": [{"name": "max_vel_x", "value": 0.25}]}},
+    )
+    assert surface.read_speed() == Call(
+        "/move_base/DWAPlannerROS/set_parameters", {"config": {"doubles": []}}
+    )
+    assert not CommandSurface.of(
+        robot_with("plain", 1, move=("/p/cmd_vel", "geometry_msgs/Twist"))
+    ).can_limit_speed
+
+
+def test_the_links_stop_socket_zeroes_a_nav2_robot_and_cancels_its_goal():
+    """The links process's zero (the CLI stop's way) sends every command of the surface, the cancel call too
+    (it once unpacked each as a publish and missed every nav2 robot)."""
+    import asyncio
+
+    from robots.links import LinkManager
+
+    robot = robot_with(
+        "n2",
+        2,
+        move=("/cmd_vel", "geometry_msgs/msg/TwistStamped"),
+        navigate=("/navigate_to_pose/_action/send_goal", "nav2_msgs/action/NavigateToPose"),
+    )
+
+    class Client:
+        is_connected = True
+        sent: list = []
+
+        async def publish(self, topic, message, type_):
+            self.sent.append(("publish", topic))
+
+        async def call_service(self, service, args, timeout):
+            self.sent.append(("call", service))
+
+    client, surface = Client(), CommandSurface.of(robot)
+
+    async def stop():
+        links = LinkManager(endpoints=[])
+        links.links[robot.endpoint], links.targets = client, {"n2": surface}
+        answer = await links.zero("all")
+        await asyncio.sleep(0.05)  # the cancel's call is sent, not waited for
+        return answer
+
+    assert asyncio.run(stop()) == {"zeroed": ["n2"], "missed": {}, "unknown": []}
+    assert client.sent == [("publish", "/cmd_vel"), ("call", "/navigate_to_pose/_action/cancel_goal")]

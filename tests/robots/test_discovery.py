@@ -81,6 +81,7 @@ def test_demo_world_endpoints(paper_world):
     assert found["tb3_nav2"][0].ros_version == 2
     assert found["tb3_nav2"][0].actions == {
         "/navigate_to_pose": "nav2_msgs/action/NavigateToPose",
+        "/navigate_through_poses": "nav2_msgs/action/NavigateThroughPoses",
         "/dock": "irobot_create_msgs/action/Dock",
     }
     assert found["robots"][0].actions == {"/robot1/move_base": "move_base_msgs/MoveBaseAction"}

@@ -11,7 +11,7 @@ from fleetcore.bindings import ROLES
 from robots.binding import choose
 from robots.models import Binding, RegistrationRecord, Robot, Topic
 from robots.registration import register_endpoints
-from tests.robots.fakes import HttpServer, OddServer, free_port, robot_graph
+from tests.robots.fakes import HttpServer, OddServer, free_port, nav2_robot, robot_graph
 
 pytestmark = [pytest.mark.timeout(60), pytest.mark.django_db]
 
@@ -185,3 +185,57 @@ def test_an_endpoint_with_1200_topics_registers(endpoint):
     robot = Robot.objects.get(name="bigbot")
     assert result.ok and robot.topics.count() == 1200
     assert (bound(robot, "move"), bound(robot, "odometry")) == ("/cmd_vel", "/odom")
+
+
+NAV2_MAKERS = {  # ROS 2 robots of makers not in the profiles, as their nav2 bringups name things
+    "scout_mini": lambda g: nav2_robot(g, "", "scout_mini"),  # AgileX: /cmd_vel, /odom
+    "mpo_700": lambda g: [nav2_robot(g, ns, "mpo_700") for ns in ("/robot0", "/robot1")],  # Neobotix, a pair
+    "summit_xl": lambda g: nav2_robot(
+        g, "", "summit_xl", "robotnik_base_control/cmd_vel", "robotnik_base_control/odom"
+    ),
+}
+
+
+def test_ros2_nav2_robots_of_other_makers_bind_the_actions_and_the_speed_limit(endpoint):
+    eps = {maker: endpoint(ros_version=2, build=build) for maker, build in NAV2_MAKERS.items()}
+    results = register_endpoints([ep.url for ep in eps.values()])
+    assert all(r.ok for r in results), [r.error for r in results]
+    robots = {(r.endpoint, r.namespace): r for r in Robot.objects.all()}
+    expected = {
+        (eps["scout_mini"].url, ""): ("", "/cmd_vel"),
+        (eps["mpo_700"].url, "/robot0"): ("/robot0", "/robot0/cmd_vel"),
+        (eps["mpo_700"].url, "/robot1"): ("/robot1", "/robot1/cmd_vel"),
+        (eps["summit_xl"].url, ""): ("", "/robotnik_base_control/cmd_vel"),
+    }
+    assert set(robots) == set(expected)
+    for key, (ns, move) in expected.items():
+        robot = robots[key]
+        navigate = robot.bindings.get(action="navigate")
+        assert (navigate.target, navigate.kind, navigate.message_type) == (
+            f"{ns}/navigate_to_pose",
+            Binding.Kind.ACTION,
+            "nav2_msgs/action/NavigateToPose",
+        ), key  # the action, not /goal_pose beside it
+        assert bound(robot, "speed_limit") == f"{ns}/speed_limit"
+        assert (bound(robot, "move"), bound(robot, "battery")) == (move, f"{ns}/battery_state")
+        assert robot.ros_version == 2
+
+
+def test_nav_stacks_bind_their_speed_limits(paper_world):
+    register_endpoints([paper_world.urls[k] for k in ("tb3_nav2", "husky", "tiago", "spot")])
+    limits = {robot.name: robot.bindings.get(action="speed_limit") for robot in Robot.objects.all()}
+    assert (limits["tb3_nav2"].target, limits["tb3_nav2"].message_type) == (
+        "/speed_limit",
+        "nav2_msgs/msg/SpeedLimit",
+    )
+    assert (limits["husky"].target, limits["husky"].kind) == (
+        "/move_base/DWAPlannerROS/set_parameters",
+        "service",
+    )
+    assert limits["tiago"].target == "/move_base/TebLocalPlannerROS/set_parameters"
+    assert (limits["spot"].target, limits["spot"].needs_user) == (
+        "",
+        False,
+    )  # no nav stack: the portal drives
+    nav2 = Robot.objects.get(name="tb3_nav2")
+    assert bound(nav2, "battery") == "/battery_state"

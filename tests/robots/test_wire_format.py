@@ -90,6 +90,20 @@ def test_decode_rejects_what_is_not_rosbridge():
         with pytest.raises(NotRosbridgeError):
             codec.decode(raw)
     assert codec.decode('{"op": "publish", "topic": "\\/odom"}')["topic"] == "/odom"
+    for raw in ('{"op": "publish", "msg": ' + "[" * 100_000 + "]" * 100_000 + "}", '{"op": "x"} trailing'):
+        with pytest.raises(NotRosbridgeError):
+            codec.decode(raw)
+
+
+def test_decode_reads_what_rosbridge_writes_for_bad_odometry_and_exact_floats():
+    """rosbridge's json.dumps writes NaN and Infinity bare: the pose gate must see them, not a refused frame."""
+    import math
+
+    msg = codec.decode(
+        '{"op":"publish","msg":{"x":NaN,"y":-Infinity,"z":0.1,"w":1.0000000000000002,"n":12}}'
+    )["msg"]
+    assert math.isnan(msg["x"]) and msg["y"] == -math.inf
+    assert (msg["z"], msg["w"], msg["n"]) == (0.1, 1.0000000000000002, 12) and isinstance(msg["n"], int)
 
 
 def test_fragments_reassemble_with_a_float_total():

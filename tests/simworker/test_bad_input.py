@@ -7,7 +7,7 @@ import time
 import pytest
 from websockets.exceptions import ConnectionClosed
 
-import simworker.server
+import simworker.connection
 
 pytestmark = pytest.mark.timeout(60)
 TWIST = {"linear": {"x": 0.2, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
@@ -112,7 +112,7 @@ def raw_subscriber(url: str, subscribe: list[dict]) -> socket.socket:
 
 
 def test_a_client_that_never_reads_is_bounded_then_cut_off(world, bridge, monkeypatch):
-    monkeypatch.setattr(simworker.server, "STALL_SECONDS", 1.0)
+    monkeypatch.setattr(simworker.connection, "STALL_SECONDS", 1.0)
     server = server_of(world, "robots")
     calls = [{"op": "call_service", "service": "/robot1/static_map", "id": str(i)} for i in range(100)]
     silent = raw_subscriber(world.urls["robots"], [{"op": "subscribe", "topic": "/robot1/map"}, *calls])
@@ -124,7 +124,7 @@ def test_a_client_that_never_reads_is_bounded_then_cut_off(world, bridge, monkey
         if reader.recv(timeout=5).get("topic") == "/robot2/odom":
             received += 1
         queues = world.call(lambda: [len(c.queue) for c in server.clients])
-        assert max(queues) <= simworker.server.SEND_QUEUE
+        assert max(queues) <= simworker.connection.SEND_QUEUE
         if received >= 40 and len(queues) == 1:
             break
     assert received >= 40  # the reader kept getting odometry all along

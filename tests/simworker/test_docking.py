@@ -173,6 +173,6 @@ async def test_rosapi_lists_the_dock_action_server_with_its_type(sim):
         servers = await client.call_service("/rosapi/action_servers")
         feedback = await client.call_service("/rosapi/topic_type", {"topic": "/dock/_action/feedback"})
         status = await client.call_service("/rosapi/topic_type", {"topic": "/dock_status"})
-    assert servers["action_servers"] == ["/dock", "/navigate_to_pose"]
+    assert servers["action_servers"] == ["/dock", "/navigate_through_poses", "/navigate_to_pose"]
     assert feedback["type"] == "irobot_create_msgs/action/Dock_FeedbackMessage"
     assert status["type"] == "irobot_create_msgs/msg/DockStatus"

@@ -1,6 +1,11 @@
 """Navigation: move_base to A around the crate, cancel, unreachable goals; nav2 navigate_to_pose; latched /map."""
 
+import json
 import math
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -117,8 +122,140 @@ def test_nav2_cancel_action_goal_cancels(fast_world, bridge):
 
 def test_nav2_action_servers_are_listed_without_hidden_topics(fast_world, bridge):
     tb3 = bridge(fast_world.urls["tb3_nav2"])
-    assert tb3.call("/rosapi/action_servers")["values"]["action_servers"] == ["/dock", "/navigate_to_pose"]
+    assert tb3.call("/rosapi/action_servers")["values"]["action_servers"] == [
+        "/dock",
+        "/navigate_through_poses",
+        "/navigate_to_pose",
+    ]
     topics = tb3.call("/rosapi/topics")["values"]["topics"]
     assert not [t for t in topics if "/_action/" in t]
     husky = bridge(fast_world.urls["husky"])
     assert husky.call("/rosapi/action_servers")["values"]["action_servers"] == ["/move_base"]
+
+
+def nav2_pose(x, y):
+    return {"header": {"frame_id": "map"}, "pose": {"position": {"x": x, "y": y}, "orientation": {"w": 1.0}}}
+
+
+def test_nav2_navigate_through_poses_visits_each_pose_with_feedback(fast_world, bridge):
+    tb3 = bridge(fast_world.urls["tb3_nav2"])
+    x, y, _ = fast_world.pose("tb3_nav2")
+    poses = [nav2_pose(x + 0.5, y), nav2_pose(x + 0.5, y + 0.5)]
+    tb3.send(
+        "send_action_goal",
+        action="/navigate_through_poses",
+        action_type="nav2_msgs/action/NavigateThroughPoses",
+        id="through-1",
+        feedback=True,
+        args={"poses": poses, "behavior_tree": ""},
+    )
+    remaining = set()
+    while True:
+        msg = tb3.recv(timeout=30)
+        if msg["op"] == "action_feedback":
+            remaining.add(msg["values"]["number_of_poses_remaining"])
+        elif msg["op"] == "action_result":
+            break
+    assert (msg["status"], msg["id"], msg["values"]) == (4, "through-1", {"result": {}})
+    assert remaining == {2, 1}  # the first pose was passed on the way
+    assert math.dist(fast_world.pose("tb3_nav2")[:2], (x + 0.5, y + 0.5)) < 0.2
+
+
+def test_nav2_cancel_goal_service_with_a_zero_goal_id_cancels_every_goal(fast_world, bridge):
+    """A stop from another connection than the goal's: action_msgs/srv/CancelGoal, zero uuid and stamp."""
+    sender, stopper = bridge(fast_world.urls["tb3_nav2"]), bridge(fast_world.urls["tb3_nav2"])
+    sender.send("subscribe", topic="/navigate_to_pose/_action/status", id="s")
+    x, y, _ = fast_world.pose("tb3_nav2")
+    sender.send(
+        "send_action_goal",
+        action="/navigate_to_pose",
+        action_type="nav2_msgs/action/NavigateToPose",
+        id="far",
+        args={"pose": nav2_pose(x + 2.0, y)},
+    )
+    sender.wait_for(lambda m: m.get("topic") == "/navigate_to_pose/_action/status")  # accepted, executing
+    zero = {"goal_id": {"uuid": [0] * 16}, "stamp": {"sec": 0, "nanosec": 0}}
+    reply = stopper.call("/navigate_to_pose/_action/cancel_goal", {"goal_info": zero})["values"]
+    assert reply["return_code"] == 0 and len(reply["goals_canceling"]) == 1
+    status = sender.wait_for(lambda m: m.get("topic") == "/navigate_to_pose/_action/status")
+    assert status["msg"]["status_list"][-1]["status"] == 5  # CANCELED, as every client of the action sees
+    result = sender.wait_for(lambda m: m["op"] == "action_result")
+    assert (result["status"], result["id"]) == (5, "far")
+
+
+def peak_speed(client, odom_topic, until_op="action_result", timeout=40.0):
+    """The highest forward speed odometry reports until the goal's end (a simulated value, not a timing)."""
+    peak = 0.0
+    while True:
+        msg = client.recv(timeout=timeout)
+        if msg.get("topic") == odom_topic:
+            peak = max(peak, abs(msg["msg"]["twist"]["twist"]["linear"]["x"]))
+        elif msg["op"] == until_op or msg.get("topic", "").endswith("/result"):
+            return peak
+
+
+def test_nav2_speed_limit_caps_the_controller_until_lifted(fast_world, bridge):
+    tb3 = bridge(fast_world.urls["tb3_nav2"])
+    tb3.send("subscribe", topic="/odom", id="o")
+    limit = {"header": {"frame_id": ""}, "percentage": True, "speed_limit": 50.0}
+    tb3.send("publish", topic="/speed_limit", msg=limit)
+    try:
+        x, y, _ = fast_world.pose("tb3_nav2")
+        tb3.send(
+            "send_action_goal",
+            action="/navigate_to_pose",
+            action_type="nav2_msgs/action/NavigateToPose",
+            id="slow",
+            args={"pose": nav2_pose(x + 1.0, y)},
+        )
+        assert 0.05 < peak_speed(tb3, "/odom") <= 0.5 * 0.22 + 0.01
+    finally:
+        tb3.send("publish", topic="/speed_limit", msg={**limit, "speed_limit": 0.0})  # 0: no limit
+    nav = fast_world.fleet.robots["tb3_nav2"].navigator.nav
+    deadline = time.monotonic() + 5.0
+    while fast_world.call(lambda: nav.max_speed) != pytest.approx(0.22) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert fast_world.call(lambda: nav.max_speed) == pytest.approx(0.22)
+
+
+def test_move_base_local_planner_reconfigure_sets_its_top_speed(fast_world, bridge):
+    husky = bridge(fast_world.urls["husky"])
+    service = "/move_base/DWAPlannerROS/set_parameters"
+    before = husky.call(service, {"config": {}})["values"]["config"]["doubles"]
+    assert before == [{"name": "max_vel_x", "value": 0.5}]
+    husky.send("subscribe", topic="/odometry/filtered", id="o")
+    husky.send("subscribe", topic="/move_base/result", id="r")
+    config = {"doubles": [{"name": "max_vel_x", "value": 0.2}]}
+    assert husky.call(service, {"config": config})["values"]["config"]["doubles"][0]["value"] == 0.2
+    try:
+        x, y, yaw = fast_world.pose("husky")
+        ahead = {
+            "position": {"x": x + 1.2 * math.cos(yaw), "y": y + 1.2 * math.sin(yaw)},
+            "orientation": {"w": 1.0},
+        }
+        husky.send("publish", topic="/move_base/goal", msg=move_base_goal("slow", ahead))
+        assert 0.05 < peak_speed(husky, "/odometry/filtered") <= 0.21
+    finally:
+        husky.call(service, {"config": {"doubles": before}})
+    assert (
+        husky.call(service, {"config": {"doubles": [{"name": "max_vel_x", "value": "fast"}]}})["result"]
+        is False
+    )
+
+
+def test_roslibpy_action_client_runs_and_cancels_nav2_goals(fast_world):
+    """roslibpy's ROS 2 ActionClient (a real client, in its own process): navigate_through_poses with feedback to
+    SUCCEEDED, and a navigate_to_pose goal cancelled after its third feedback ends CANCELED."""
+    x, y, _ = fast_world.pose("tb3_nav2")
+    script = Path(__file__).with_name("roslibpy_nav2.py")
+    args = [sys.executable, str(script), fast_world.urls["tb3_nav2"], str(x), str(y)]
+    out = subprocess.run(args, capture_output=True, text=True, timeout=80, check=False)
+    assert out.returncode == 0, out.stderr[-2000:]
+    seen = json.loads(out.stdout)
+    through, cancelled = seen["through"], seen["cancelled"]
+    assert through["feedback"] > 0 and "number_of_poses_remaining" in through["last_feedback"]
+    assert through["result"]["status"] == 4, through
+    assert cancelled["result"]["status"] == 5, cancelled
+    assert (
+        math.dist(fast_world.pose("tb3_nav2")[:2], (x + 0.4, y + 0.4)) < 0.5
+    )  # it stopped near where it was

@@ -1,5 +1,7 @@
 """rosbridge v2 behaviour of an endpoint: echo, throttle, unsubscribe, params, client services, fragments."""
 
+import contextlib
+import itertools
 import json
 import time
 
@@ -35,6 +37,52 @@ def test_throttle_rate_limits_and_unsubscribe_stops_messages(world, bridge):
     client.call("/rosapi/get_time")
     with pytest.raises(TimeoutError):
         client.wait_for(lambda m: m.get("topic") == "/odom", timeout=0.5)
+
+
+@pytest.mark.parametrize(
+    ("queue_length", "expected"),
+    [(0, ["1"]), (2, ["1", "4", "5"])],
+    ids=["a throttle alone drops", "a throttle with a queue keeps the newest"],
+)
+def test_a_burst_under_a_throttle_is_dropped_or_queued_as_rosbridge_does(
+    world, bridge, queue_length, expected
+):
+    """rosbridge_library's subscription modifiers: under a throttle alone what comes within the interval is dropped;
+    with a queue_length the newest wait (the older dropped) and one goes each interval."""
+    pub, sub = bridge(world.urls["tiago"]), bridge(world.urls["tiago"])
+    sub.send("subscribe", topic="/chatter", type="std_msgs/String", id="s", throttle_rate=300,
+             queue_length=queue_length)  # fmt: skip
+    sub.call("/rosapi/get_time")  # the subscription is in place once this answers
+    pub.send("advertise", topic="/chatter", type="std_msgs/String", id="a")
+    for n in range(1, 6):
+        pub.send("publish", topic="/chatter", msg={"data": str(n)})
+    got, times = [], []
+    with contextlib.suppress(TimeoutError):
+        while len(got) < 5:
+            got.append(sub.wait_for(lambda m: m.get("topic") == "/chatter", timeout=1.0)["msg"]["data"])
+            times.append(time.monotonic())
+    assert got == expected
+    assert all(b - a >= 0.25 for a, b in itertools.pairwise(times))  # one an interval (300 ms)
+
+
+def test_odometry_for_a_throttled_subscriber_alone_is_built_only_when_it_is_sent(world, bridge):
+    """As rosbridge serialises nothing for a throttled subscriber: 20 Hz odometry under a 500 ms throttle is
+    written out about twice a second (the cost of a robot), while its seq counts every message of the 20 Hz."""
+    server, built = world.fleet.servers["turtlebot"], []
+    publish_text = server.publish_text
+    server.publish_text = lambda topic, text: (
+        topic == "/odom" and built.append(topic),
+        publish_text(topic, text),
+    )
+    client = bridge(world.urls["turtlebot"])
+    client.send("subscribe", topic="/odom", id="slow", throttle_rate=500)
+    first = client.wait_for(lambda m: m.get("topic") == "/odom")
+    built.clear()
+    second = client.wait_for(lambda m: m.get("topic") == "/odom")
+    third = client.wait_for(lambda m: m.get("topic") == "/odom")
+    assert len(built) <= 3  # two sent, at most one more begun: not the ~20 of a second at 20 Hz
+    seqs = [m["msg"]["header"]["seq"] for m in (first, second, third)]
+    assert all(b - a >= 5 for a, b in itertools.pairwise(seqs))  # ~10 at 20 Hz under 500 ms
 
 
 def test_ros1_params_get_set_has_and_namespaces(world, bridge):

@@ -2,6 +2,11 @@
 
 With --wait, prints each state transition of the instruction's robots with its timestamp, then the outcome
 and the timings; exits 0 only when the instruction succeeded.
+
+A plain stop ("stop", "stop husky") is read before the grammar is built (interpreter/quickstop.py) and its zeros
+asked of the running portal's links process at once (execution.fast_stop.by_portal: links already up, as the
+page's stop); without a portal, this process stops the robots on links of its own (fast_stop.stop_blocking).
+Then the instruction is submitted as any other, and control.stop does the stop's bookkeeping.
 """
 
 import time
@@ -9,8 +14,11 @@ import time
 from django.contrib.auth import get_user_model
 from django.core.management.base import BaseCommand, CommandError
 
+from access.roles import can_control
+from execution import fast_stop
 from execution.instructions import submit
 from execution.models import Instruction
+from interpreter.quickstop import stop_subject
 from robots.models import StateTransition
 
 TIMINGS = (
@@ -33,9 +41,13 @@ class Command(BaseCommand):
         parser.add_argument("--timeout", type=float, default=300.0, help="seconds to wait at most")
 
     def handle(self, *args, text, user, wait, timeout, **options):
+        self.verbosity = options.get("verbosity", 1)
         account = get_user_model().objects.filter(username=user).first()
         if account is None:
             raise CommandError(f"--user: no user named {user!r}")
+        names = stop_subject(text)
+        if names is not None and can_control(account):
+            self.stop_first(names)
         instruction = submit(text, account, source="cli")
         self.stdout.write(f"instruction #{instruction.pk}: {instruction.status}")
         if not wait:
@@ -44,6 +56,20 @@ class Command(BaseCommand):
         self.report(instruction)
         if instruction.status != Instruction.Status.SUCCEEDED:
             raise CommandError(f"instruction #{instruction.pk} {instruction.status}: {instruction.outcome}")
+
+    def stop_first(self, names) -> None:
+        """The zeros before the grammar: by the running portal's links, else on this process's own."""
+        asked = time.monotonic()
+        answer = fast_stop.by_portal(names)
+        if answer is not None and answer["zeroed"]:
+            took = (time.monotonic() - asked) * 1000
+            self.stdout.write(
+                f"zeros sent by the portal's links in {took:.0f} ms: {', '.join(answer['zeroed'])}"
+            )
+            if self.verbosity > 1:  # for the bench: when the request left, on the machine's monotonic clock
+                self.stdout.write(f"portal stop asked at monotonic {asked:.6f}")
+        if answer is None or answer["missed"] or answer["unknown"]:
+            fast_stop.stop_blocking(names)
 
     def follow(self, instruction: Instruction, timeout: float) -> Instruction:
         """Print transitions as they are stored, until the instruction is final or the timeout."""

@@ -7,6 +7,7 @@ from django.core.management.base import BaseCommand, CommandError
 from django.utils import timezone
 
 from execution.scheduler import Clock, loop
+from fleetcore import heartbeat
 
 
 class Command(BaseCommand):
@@ -33,4 +34,5 @@ class Command(BaseCommand):
         signal.signal(signal.SIGTERM, lambda *_: stopping.append(True))
         signal.signal(signal.SIGINT, lambda *_: stopping.append(True))
         self.stdout.write(f"scheduler running (tick {period:g} s)")
-        loop(clock, period, should_stop=lambda: bool(stopping))
+        beat = heartbeat.from_env()
+        loop(clock, period, should_stop=lambda: bool(stopping), beat=beat.beat if beat else lambda: None)

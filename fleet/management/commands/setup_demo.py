@@ -7,6 +7,8 @@ from django.contrib.auth.models import Group, User
 from django.core.management.base import BaseCommand, CommandError
 
 from access.roles import ADMIN, sync_groups
+from fleetcore.world import WorldFormatError
+from places.worlds import load_world_into_db
 
 
 class Command(BaseCommand):
@@ -18,9 +20,6 @@ class Command(BaseCommand):
     def handle(self, *args, world, **options):
         sync_groups()
         password = self.ensure_admin()
-        from fleetcore.world import WorldFormatError
-        from places.worlds import load_world_into_db
-
         try:
             summary = load_world_into_db(world)
         except WorldFormatError as exc:

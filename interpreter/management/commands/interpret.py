@@ -20,11 +20,11 @@ class Command(BaseCommand):
         if (text is None) == (file is None):
             raise CommandError('give either an instruction ("TEXT") or --file PATH|-')
         if text is not None:
-            self._print(interpret(text))
+            self._print(interpret(text).to_dict())
             return
         for line in self._lines(file):
             if line.strip():
-                self._print(interpret(line.rstrip("\r\n")))
+                self._print(interpret(line.rstrip("\r\n")).to_dict())
 
     def _lines(self, file):
         if file == "-":

@@ -8,16 +8,18 @@ import signal
 from asgiref.sync import sync_to_async
 from django.core.management.base import BaseCommand, CommandError
 
-from robots import endpoints
+from fleetcore import heartbeat
+from fleetcore.world import WorldFormatError, load_world
+from robots import endpoints, stopsocket
+from robots.endpoints import allow_list
 from robots.links import LinkManager, battery_hook, wait_for_endpoints
-from robots.registration import allow_list, discover_all, store_all
+from robots.poses import PoseHub, link_hook
+from robots.registration import discover_all, store_all
 from robots.rosbridge import RosbridgeError
 
 
 def world_endpoints(name: str, host: str, port_base: int) -> list[str]:
     """The URLs of a simulator world's endpoints that carry robots."""
-    from fleetcore.world import WorldFormatError, load_world
-
     try:
         world = load_world(name)
     except (OSError, WorldFormatError) as exc:
@@ -55,18 +57,25 @@ class Command(BaseCommand):
         asyncio.run(self.main(urls, opts["wait"], opts["only"]))
 
     async def main(self, urls: list[str], wait: float, only: bool) -> None:
-        from robots.poses import PoseHub, link_hook
-
+        beat = heartbeat.from_env()
+        beating = beat.start_task() if beat else None  # renewed by this loop: a blocked loop is seen as hung
         hub = PoseHub()  # live poses for the portal, from the links' own odometry subscriptions
         manager = LinkManager(urls if only else None, hooks=[link_hook(hub), battery_hook])
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, manager.stop)
+        stop_line = stopsocket.StopServer(manager.zero, manager.linked)  # a fresh CLI's stop, zeroed here
+        await stop_line.start(stopsocket.path())
         if urls:
             registered = await self.register(urls, wait, manager.stopping)
             manager.fixed = registered if only else None
         self.stdout.write("robot links running (Ctrl-C to stop)")
-        await asyncio.gather(manager.run(), hub.run(manager.stopping))
+        try:
+            await asyncio.gather(manager.run(), hub.run(manager.stopping))
+        finally:
+            await stop_line.close()
+        if beating is not None:
+            beating.cancel()
         self.stdout.write("robot links stopped")
 
     async def register(self, urls: list[str], wait: float, stopping: asyncio.Event) -> list[str]:
