@@ -22,9 +22,12 @@ crash is the worse surprise. A person sees the alert and sends the instruction a
 from __future__ import annotations
 
 import logging
-from concurrent.futures import ThreadPoolExecutor
+import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from concurrent.futures import TimeoutError as FuturesTimeout
 from datetime import timedelta
 
+from django.db import connections
 from django.utils import timezone
 
 import alerts
@@ -38,6 +41,7 @@ from robots.rosbridge.sync import get_client
 
 log = logging.getLogger(__name__)
 STALLED_AFTER = 3.0  # s a queued execution may wait for its task before the robot is kicked
+STOP_WAIT_S = 2.0  # s the records wait for a lost executor's robot's zero (it is still sent after)
 LOST = "executor lost: the process running it stopped renewing its lock; the robot was stopped"
 
 
@@ -62,27 +66,46 @@ def recover(robot_ids=None) -> list[int]:
     failed = [execution for execution in lost if _claim_failure(execution, said.get(execution.pk, LOST))]
     if not failed:
         return []
-    with ThreadPoolExecutor(max_workers=min(8, len(failed))) as pool:  # one unreachable robot delays no other
-        list(pool.map(_stop, [execution.robot for execution in failed]))
-    for execution in failed:
-        why = said.get(execution.pk, LOST)
-        # its route and claims, which nobody renews now, free at once
-        traffic_state.release(execution.robot, None)
-        Robot.objects.transition(execution.robot_id, Event.FAIL, why[:255], execution.instruction_id)
-        settle(execution.instruction_id)
-        if execution.pk in said:  # its runner ended it, the database refused the record: no executor was lost
-            coordination.forget_unrecorded_end(execution.pk)
-            continue
-        alerts.raise_alert(
-            "executor_lost",
-            execution.robot,
-            f"instruction #{execution.instruction_id}: {LOST}",
-            execution.event,
+    started = time.monotonic()
+    stops = {_stopping.submit(_stop, execution.robot): execution for execution in failed}
+    pending = dict(stops)
+    try:  # each robot's bookkeeping once its own zero is out: a slow or unreachable robot delays no other
+        for done in as_completed(stops, timeout=STOP_WAIT_S):
+            _fail(pending.pop(done), said)
+    except FuturesTimeout:  # its zero still being sent (the stop goes on): the record does not wait for it
+        log.warning(
+            "executor lost: zeros not out after %.1f s to %s",
+            STOP_WAIT_S,
+            [e.robot.name for e in pending.values()],
         )
+        for execution in pending.values():
+            _fail(execution, said)
+    log.info(
+        "executor lost: %d robots stopped and settled in %.2f s", len(failed), time.monotonic() - started
+    )
     return [execution.pk for execution in failed]
 
 
+def _fail(execution: Execution, said: dict[int, str]) -> None:
+    """The records of one lost execution: its claims freed, its robot failed, its instruction settled, an alert."""
+    why = said.get(execution.pk, LOST)
+    # its route and claims, which nobody renews now, free at once
+    traffic_state.release(execution.robot, None)
+    Robot.objects.transition(execution.robot_id, Event.FAIL, why[:255], execution.instruction_id)
+    settle(execution.instruction_id)
+    if execution.pk in said:  # its runner ended it, the database refused the record: no executor was lost
+        coordination.forget_unrecorded_end(execution.pk)
+        return
+    alerts.raise_alert(
+        "executor_lost",
+        execution.robot,
+        f"instruction #{execution.instruction_id}: {LOST}",
+        execution.event,
+    )
+
+
 _linking = ThreadPoolExecutor(max_workers=4, thread_name_prefix="watchdog link")
+_stopping = ThreadPoolExecutor(max_workers=16, thread_name_prefix="watchdog stop")
 _linked: set[str] = set()  # endpoints this process has a link to (robots.rosbridge.sync keeps it up)
 
 
@@ -117,6 +140,8 @@ def _stop(robot: Robot) -> None:
         publish_zero(robot)
     except Exception as exc:  # report, and still settle the instruction
         log.warning("%s: could not stop after its executor was lost: %s", robot.name, exc)
+    finally:
+        connections.close_all()  # this pool thread's own; none is left open between losses
 
 
 def stalled_robots() -> list[int]:

@@ -50,6 +50,12 @@ def lock_owners(robots: dict[str, dict]) -> dict[str, str]:
     return owners
 
 
+def log_tail(cluster, name: str, lines: int = 20) -> list[str]:
+    """The last lines of one process's log in the cluster (what it did while the test waited)."""
+    path = cluster.log_dir / name
+    return path.read_text(errors="replace").splitlines()[-lines:] if path.exists() else [f"{path}: none"]
+
+
 def distance_from(points, place: dict) -> float:
     """The mean distance from the points to the place."""
     points = list(points)
@@ -130,6 +136,10 @@ def test_the_fleet_survives_losing_an_executor_host_a_web_host_and_a_simulator_s
             settled,
             max(0.1, EXEC_HOST_DEADLINE_S - (time.monotonic() - lost)),
             f"instructions of {on_exec1} settled",
+            explain=lambda: {
+                "statuses": {n: portal.get(f"instructions/{instruction_of[n]}")["status"] for n in on_exec1},
+                "scheduler log": log_tail(cluster, "links-scheduler.log"),
+            },
         )
 
         # web1 lost: the same session carries on on web2 (sessions are in the shared database); a stop sent there
