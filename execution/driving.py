@@ -49,7 +49,7 @@ def travel(session: Session, goal, pace: Pace, nav: bool = False) -> tuple[float
     robot = session.robot
     _measure_clock(session)
     around: set[int] = set()
-    reroutes, settles, stuck_since = 0, 0, None
+    reroutes, gave_way, settles, stuck_since = 0, 0, 0, None
     here = session.pose()[:2]
     # under traffic from now on: others wait for it, not go round it
     traffic.claim(robot, here, here, session.check)
@@ -71,16 +71,20 @@ def travel(session: Session, goal, pace: Pace, nav: bool = False) -> tuple[float
                 continue
             stuck_since, spot = None, tuple(path[-1][:2])
             try:
-                _follow(session, path, pace, nav)
+                _follow(session, path, pace, nav, frozenset(around))
                 done = math.dist(spot, goal) < tune.SETTLE_M or settles >= tune.SETTLE_TRIES
                 if done or not _passed(session, spot):
                     return spot
                 settles, spot = settles + 1, tuple(goal)  # its goal may be free by now: again
             except traffic.Reroute as exc:
-                reroutes += 1
+                gave_way, reroutes = gave_way + exc.gave_way, reroutes + (not exc.gave_way)
                 if reroutes > tune.MAX_REROUTES:
                     raise StepFailed(
                         f"{robot.name}: no way through after {tune.MAX_REROUTES} reroutes"
+                    ) from None
+                if gave_way > tune.MAX_GIVE_WAYS:
+                    raise StepFailed(
+                        f"{robot.name}: no way through: it gave way {tune.MAX_GIVE_WAYS} times in deadlocks"
                     ) from None
                 around |= exc.around
                 _back_off(session, exc.around, pace, nav)
@@ -177,7 +181,7 @@ def _measure_clock(session: Session) -> None:
         session.check()
 
 
-def _follow(session: Session, path, pace: Pace, nav: bool) -> None:
+def _follow(session: Session, path, pace: Pace, nav: bool, gone_round: frozenset = frozenset()) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
     asked for, or the free spot next to it when that was taken). The plan is never replanned on the way: the
     claims keep its order however late the robot runs (a replan would make a new order against robots already
@@ -188,7 +192,8 @@ def _follow(session: Session, path, pace: Pace, nav: bool) -> None:
     nav stack drives at a pace of its own, which later plans are timed at (known_pace; until it is seen, the
     robot's speed limit: a stack slower than that is late, which the order allows for).
     A nav stack that gives up on a corner of the route (a goal its footprint cannot reach beside
-    an obstacle) goes on to the next one; giving up on the goal itself ends the step."""
+    an obstacle) goes on to the next one; giving up on the goal itself ends the step. gone_round: the robots
+    this trip went round (traffic.wait_for asks one that still stands in the way to make way)."""
     robot, goal, planned = session.robot, path[-1][:2], path[0][2]
     legs = stretches(path)
     due = planned  # when the next stretch is planned to begin
@@ -202,7 +207,8 @@ def _follow(session: Session, path, pace: Pace, nav: bool) -> None:
         if hold:
             continue
         pose = session.pose()
-        traffic.wait_for(session, pose[:2], (x, y), (begins, t))
+        ahead = [tuple(p[:2]) for p in legs[i:]]
+        traffic.wait_for(session, pose[:2], (x, y), (begins, t), ahead, gone_round)
         last = i == len(legs) - 1
         target = tuple(goal) if last else (x, y)
         distance = math.dist(pose[:2], target)

@@ -30,6 +30,7 @@ from execution.steps import (
     Session,
     Stalled,
     StepFailed,
+    at_rest,
     drive,
     follow_goal,
     travel_time,
@@ -72,9 +73,9 @@ def _arrive(session: Session, destination: Destination, pace: Pace) -> outcomes.
 
 
 def ending_at(session: Session, destination: Destination, spot) -> outcomes.Ending:
-    """Where the robot ended, sent to the destination and given `spot` to stop at: from its odometry now,
-    which the pose store then holds too (what every page and query reads)."""
-    pose = session.pose()
+    """Where the robot ended, sent to the destination and given `spot` to stop at: from its odometry once at
+    rest (steps.at_rest), which the pose store then holds too (what every page and query reads)."""
+    pose = at_rest(session)
     pose_store.store_pose(session.robot.pk, pose)
     place, center = destination.place
     taken_by = in_the_way(session.robot, center, center, "goal")[0] or destination.taken_by

@@ -22,6 +22,7 @@ from execution import coordination
 from execution.link import RobotLink
 from execution.models import Execution, Instruction
 from fleetcore import faults, geometry
+from fleetcore import traffic_tuning as tune
 from fleetcore.speed import Limits
 from robots import poses as pose_store
 
@@ -243,6 +244,21 @@ class Progress:
 
 def _heading_error(pose, goal) -> float:
     return abs(geometry.wrap(math.atan2(goal[1] - pose[1], goal[0] - pose[0]) - pose[2]))
+
+
+def at_rest(session: Session) -> tuple[float, float, float]:
+    """Stop the robot and read odometry until it has come to rest (two poses within REST_M, at most
+    REST_LIMIT_S): where it stands. Where a step ends is judged from it: judged from the pose as the robot was
+    told to stop, a TurtleBot coasting on said "1.1 m east of A" and stood 1.2 m off."""
+    session.link.halt()
+    deadline = time.monotonic() + tune.REST_LIMIT_S
+    before = session.pose()
+    while time.monotonic() < deadline:
+        now = session.pose()
+        if math.dist(before[:2], now[:2]) < tune.REST_M:
+            return now
+        before = now
+    return before
 
 
 def drive(session: Session, controller, limit_s: float, stall_s: float | None = None, goal=None) -> None:

@@ -55,7 +55,7 @@ import live
 from execution import coordination, route, signals
 from execution import traffic_fleet as fleet
 from execution import traffic_state as state
-from execution.steps import Session, StepFailed
+from execution.steps import Session, StepFailed, at_rest
 from fleetcore import traffic as plain
 from fleetcore import traffic_tuning as tune
 from robots.models import Robot
@@ -64,11 +64,11 @@ log = logging.getLogger(__name__)
 
 
 class Reroute(Exception):
-    """Replan from here, around these robots (ids), which stand in the way."""
+    """Replan from here, around these robots (ids), which stand in the way; gave_way: to break a deadlock."""
 
-    def __init__(self, around: set[int]) -> None:
+    def __init__(self, around: set[int], gave_way: bool = False) -> None:
         super().__init__(around)
-        self.around = around
+        self.around, self.gave_way = around, gave_way
 
 
 def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
@@ -286,16 +286,7 @@ def _idle_in_the_way(redis, robot: Robot, through, exact) -> dict[int, plain.Cap
     refused lately and not made way for this robot lately: {id: where they stand}. Robots under traffic,
     busy ones (about to set off: plans go round them, but they are not asked) and others' goals are not
     idle."""
-    asked = {
-        pk for pk, e in state.read(redis, "makeway").items() if not e.get("done") or e["for"] == robot.pk
-    }
-    under = (
-        set(state.read(redis, "plans"))
-        | set(state.read(redis, "claims"))
-        | asked
-        | fleet.busy_ids()
-        | fleet.kept_still()
-    )
+    under = _not_to_ask(redis, robot)
     return {
         int(disc.label): disc
         for disc, since in exact
@@ -303,6 +294,21 @@ def _idle_in_the_way(redis, robot: Robot, through, exact) -> dict[int, plain.Cap
         and int(disc.label) not in under
         and plain.passes(through, disc, fleet.reach(robot))
     }
+
+
+def _not_to_ask(redis, robot: Robot) -> set[int]:
+    """The robots this one may not ask to make way: under traffic, busy, kept still (by a person's stop or
+    hold), asked already, or that made way for it lately."""
+    asked = {
+        pk for pk, e in state.read(redis, "makeway").items() if not e.get("done") or e["for"] == robot.pk
+    }
+    return (
+        set(state.read(redis, "plans"))
+        | set(state.read(redis, "claims"))
+        | asked
+        | fleet.busy_ids()
+        | fleet.kept_still()
+    )
 
 
 def ask_to_make_way(robot: Robot) -> None:
@@ -427,22 +433,26 @@ def yet_to_pass(robot: Robot, spot) -> bool:
     return False
 
 
-def wait_for(session: Session, start, end, planned=None) -> None:
+def wait_for(session: Session, start, end, planned=None, ahead=(), gone_round=frozenset()) -> None:
     """Claim the stretch, waiting while another robot is in the way (or is planned there first: claim());
     raise Reroute to break a deadlock or to go around a robot that is not under way; StepFailed after
-    WAIT_LIMIT_S. planned: the stretch's (t0, t1) in the robot's plan.
+    WAIT_LIMIT_S. planned: the stretch's (t0, t1) in the robot's plan; ahead: the rest of the plan's points.
+
+    A parked, idle robot this trip already went round (gone_round) and still stands in the way is asked to
+    make way, once, along `ahead`: a plan round it that the claims refuse again would be made the same
+    (robots parked shoulder to shoulder, 0.6 m apart: "goes round robot3" four times, then "no way through").
 
     A waiting robot holds only the room it stands in (others may pass behind it) and tries every WAIT_POLL_S;
     every NOTE_WAIT_S it reads the robots standing afresh, notes whom it waits for, keeps its claim alive and
     looks for a cycle of waits."""
     robot, redis = session.robot, coordination.connection()
     started = same_since = noted = told = time.monotonic()
-    last, name, everyone, why = None, "", None, []
+    last, name, everyone, why, asked = None, "", None, [], False
     while (blocker := claim(robot, start, end, session.check, everyone, planned, why)) is not None:
         now = time.monotonic()
         if blocker != last:
             if last is None:  # it waits where it comes to rest: it holds that room, not the stretch behind
-                here = _at_rest(session)
+                here = at_rest(session)[:2]
                 claim(robot, here, here, session.check, everyone, planned)
             same_since, last = now, blocker
             name = Robot.objects.filter(pk=blocker).values_list("name", flat=True).first() or f"#{blocker}"
@@ -457,6 +467,11 @@ def wait_for(session: Session, start, end, planned=None) -> None:
             state.renew(redis, robot.pk)
             _check_deadlock(redis, robot.pk)
             if now - same_since > tune.REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
+                if not asked and blocker in gone_round and blocker not in _not_to_ask(redis, robot):
+                    state.request_way(redis, robot, fleet.reach(robot), {blocker: None}, [start, *ahead])
+                    ask_to_make_way(robot)  # it waits on: _parked() is False while the request stands
+                    asked, same_since = True, now
+                    continue
                 log.info("traffic: %s goes round %s, which stands in its way", robot.name, name)
                 raise Reroute({blocker})
         if now - told >= tune.TELL_WAIT_S:
@@ -487,19 +502,6 @@ def _doing(redis, robot_id: int) -> str:
     return "it stands, not under traffic"
 
 
-def _at_rest(session: Session) -> tuple[float, float]:
-    """Stop the robot and read odometry until it has come to rest (or REST_LIMIT_S): where it stands."""
-    session.link.halt()
-    deadline = time.monotonic() + tune.REST_LIMIT_S
-    before = session.pose()
-    while time.monotonic() < deadline:
-        now = session.pose()
-        if math.dist(before[:2], now[:2]) < tune.REST_M:
-            return now[:2]
-        before = now
-    return before[:2]
-
-
 def _parked(redis, blocker: int, waited: float) -> bool:
     """Whether a robot in the way is parked (go round it), not one under way or about to be (wait for it)."""
     if blocker in state.read(redis, "claims"):
@@ -524,4 +526,4 @@ def _check_deadlock(redis, robot_id: int) -> None:
         held,
         why,
     )
-    raise Reroute({int(pk) for pk in cycle} - {robot_id})
+    raise Reroute({int(pk) for pk in cycle} - {robot_id}, gave_way=True)

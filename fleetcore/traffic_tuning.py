@@ -44,7 +44,10 @@ NOTE_WAIT_S = 0.6  # s between a waiting robot's notes of whom it waits for (and
 TELL_WAIT_S = 10.0  # s between a waiting robot's log lines (whom it waits for, and what that one does)
 REROUTE_AFTER_S = 4.0  # s waiting for a robot that is not under way before going around it
 BUSY_WAIT_S = 20.0  # s waiting for a robot busy with an instruction (it may set off) before going around it
-MAX_REROUTES = 4  # reroutes of one trip (deadlocks broken, robots standing gone round) before it fails
+MAX_REROUTES = 4  # robots standing gone round on one trip before it fails ("no way through")
+# deadlocks one trip broke by giving way before it fails: counted apart, as the one to give way takes turns
+# (traffic_state.break_deadlock), two robots bound for spots side by side each gave way 4 times and one failed
+MAX_GIVE_WAYS = 8
 BACK_OFF_M = 0.4  # m a robot breaking a deadlock drives away from the others first (_back_off)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from execution.steps import Progress, Stalled, StepFailed, drive
+from execution.steps import Progress, Stalled, StepFailed, at_rest, drive
 from fleetcore import motion
 
 
@@ -107,3 +107,22 @@ def _known(robot) -> bool:
     from robots.poses import last_poses
 
     return robot.pk in last_poses([robot.pk])
+
+
+class CoastingSession(StuckSession):
+    """Odometry of a robot told to stop that coasts on, slower each message, then stands."""
+
+    def __init__(self, steps):
+        super().__init__()
+        self.xs = iter(steps)
+        self.x = 0.0
+
+    def pose(self):
+        self.x = next(self.xs, self.x)
+        return (self.x, 0.0, 0.0)
+
+
+def test_where_a_step_ended_is_read_once_the_robot_is_at_rest_not_as_it_was_told_to_stop():
+    session = CoastingSession([1.00, 1.04, 1.07, 1.09, 1.10, 1.10])
+    assert at_rest(session) == (1.10, 0.0, 0.0)  # not 1.00, where it was when told to stop
+    assert session.sent == ["halt"]

@@ -98,7 +98,7 @@ def test_a_wait_for_cycle_is_broken_by_the_robot_that_gave_way_least_then_the_hi
     traffic._check_deadlock(redis, low.pk)  # the lower id keeps waiting
     with pytest.raises(traffic.Reroute) as caught:
         traffic._check_deadlock(redis, high.pk)
-    assert caught.value.around == {low.pk}
+    assert caught.value.around == {low.pk} and caught.value.gave_way  # (counted apart from going round)
     assert traffic_state.deadlocks() == before + 1
     traffic._check_deadlock(redis, low.pk)  # broken once: the breaker waits no more, low keeps waiting
     assert traffic_state.deadlocks() == before + 1
@@ -432,3 +432,42 @@ def test_a_robot_does_not_plan_again_for_its_goal_where_another_has_yet_to_pass(
     end = path[-1]
     assert traffic.claim(b, end[:2], end[:2], planned=(end[2], end[2])) is None  # b at its goal: passed
     assert not traffic.yet_to_pass(a, spot)
+
+
+def test_a_parked_robot_a_trip_went_round_and_still_finds_in_its_way_is_asked_to_make_way(
+    robots, monkeypatch
+):
+    """Robots parked shoulder to shoulder: the plan round one of them that the claims refuse would be made the
+    same again (robot2 "goes round robot3" four times, then "no way through"). The first time, the waiting
+    robot goes round it; once its trip has gone round it, it asks it to make way and waits for it."""
+    a, b = robots["a"], robots["b"]
+    redis = coordination.connection()
+    traffic_state.release(b, (0.0, -2.0, 0.0))  # b parked across a's stretch, idle
+    for name, value in {
+        "REROUTE_AFTER_S": 0.0,
+        "NOTE_WAIT_S": 0.0,
+        "WAIT_POLL_S": 0.01,
+        "WAIT_LIMIT_S": 0.3,
+    }.items():
+        monkeypatch.setattr(tune, name, value)
+    sent = []
+
+    def ask(robot):  # what traffic.ask_to_make_way does, without submitting a make_way instruction
+        for pk, entry in traffic_state.read(redis, "makeway").items():
+            sent.append((robot.pk, pk))
+            traffic_state.write(redis, "makeway", pk, {**entry, "sent": True, "refused": ""})
+
+    monkeypatch.setattr(traffic, "ask_to_make_way", ask)
+    session, stretch, ahead = (
+        StandingSession(a, (-2.0, -2.0, 0.0)),
+        ((-2.0, -2.0), (2.0, -2.0)),
+        [(2.0, -2.0)],
+    )
+    with pytest.raises(traffic.Reroute) as caught:  # first: round it
+        traffic.wait_for(session, *stretch, None, ahead)
+    assert caught.value.around == {b.pk} and not caught.value.gave_way and sent == []
+    with pytest.raises(StepFailed, match="to make way"):  # gone round it already: asked, waited for
+        traffic.wait_for(session, *stretch, None, ahead, gone_round=frozenset({b.pk}))
+    assert sent == [(a.pk, b.pk)]
+    request = traffic_state.read(redis, "makeway")[b.pk]
+    assert request["for"] == a.pk and request["route"] == [[-2.0, -2.0], [2.0, -2.0]]
