@@ -248,8 +248,8 @@ def _heading_error(pose, goal) -> float:
 
 def at_rest(session: Session) -> tuple[float, float, float]:
     """Stop the robot and read odometry until it has come to rest (two poses within REST_M, at most
-    REST_LIMIT_S): where it stands. Where a step ends is judged from it: judged from the pose as the robot was
-    told to stop, a TurtleBot coasting on said "1.1 m east of A" and stood 1.2 m off."""
+    REST_LIMIT_S): where it stands. Where a step ends is judged from it, not from the pose as the robot was told
+    to stop: a robot slows down within its acceleration limit (a Husky, 1 m/s², goes on 0.5 m from 1 m/s)."""
     session.link.halt()
     deadline = time.monotonic() + tune.REST_LIMIT_S
     before = session.pose()
