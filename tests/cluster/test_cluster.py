@@ -117,15 +117,26 @@ def test_the_fleet_survives_losing_an_executor_host_a_web_host_and_a_simulator_s
             poll=0.2,
         )
         on_exec1 = sorted(driven["exec1"])
+        # what exec1 runs on them now: the test's own instruction, or one the system put first (a make_way a
+        # robot still waiting for its turn was asked for, its own instruction queued behind it)
+        running = {n: (portal.get(f"robots/{n}/queue")["running"] or {}).get("instruction") for n in on_exec1}
 
-        # exec1 lost: every process of the host killed mid-work. Its robots come to rest and their instructions
-        # are settled (failed "executor lost", docs/fault-survival.md, "Executor lost") within 10 s.
+        # exec1 lost: every process of the host killed mid-work. Its robots come to rest and the instructions it
+        # ran are settled (failed "executor lost", docs/fault-survival.md, "Executor lost") within 10 s; work
+        # queued behind them goes on on exec2 (or is settled).
         killed = cluster.kill_host("exec1")
         assert len(killed) >= 2  # the instructions worker and the control worker (and their pool)
         lost = time.monotonic()
 
+        def status(pk: int) -> str:
+            return portal.get(f"instructions/{pk}")["status"]
+
         def settled() -> bool:
-            return all(portal.get(f"instructions/{instruction_of[n]}")["status"] in FINAL for n in on_exec1)
+            return all(status(pk) in FINAL for pk in running.values() if pk)
+
+        def taken_over() -> bool:
+            owners = lock_owners({n: robots[n] for n in on_exec1})
+            return all(status(instruction_of[n]) in FINAL or owners.get(n) == "exec2" for n in on_exec1)
 
         wait(
             lambda: odometry.at_rest(on_exec1),
@@ -135,11 +146,18 @@ def test_the_fleet_survives_losing_an_executor_host_a_web_host_and_a_simulator_s
         wait(
             settled,
             max(0.1, EXEC_HOST_DEADLINE_S - (time.monotonic() - lost)),
-            f"instructions of {on_exec1} settled",
+            f"the instructions exec1 ran on {on_exec1} settled",
             explain=lambda: {
-                "statuses": {n: portal.get(f"instructions/{instruction_of[n]}")["status"] for n in on_exec1},
+                "running then": running,
+                "statuses": {pk: status(pk) for pk in running.values() if pk},
                 "scheduler log": log_tail(cluster, "links-scheduler.log"),
             },
+        )
+        wait(
+            taken_over,
+            15,
+            "exec1's robots' own instructions settled or run on by exec2",
+            explain=lambda: {n: (status(instruction_of[n]), lock_owners(robots).get(n)) for n in on_exec1},
         )
 
         # web1 lost: the same session carries on on web2 (sessions are in the shared database); a stop sent there
