@@ -117,8 +117,8 @@ def test_the_fleet_survives_losing_an_executor_host_a_web_host_and_a_simulator_s
             poll=0.2,
         )
         on_exec1 = sorted(driven["exec1"])
-        # what exec1 runs on them now: the test's own instruction, or one the system put first (a make_way a
-        # robot still waiting for its turn was asked for, its own instruction queued behind it)
+        # what exec1 runs on them now: the test's own instruction, or one the system put first (a make_way the
+        # robot was asked for before its own instruction came, which then queued behind it)
         running = {n: (portal.get(f"robots/{n}/queue")["running"] or {}).get("instruction") for n in on_exec1}
 
         # exec1 lost: every process of the host killed mid-work. Its robots come to rest and the instructions it
