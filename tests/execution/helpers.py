@@ -61,3 +61,21 @@ def at_rest(sim, name: str) -> bool:
     """The simulated body has stopped, on a zero command (not only by its command timeout)."""
     body = sim.fleet.robots[name].body
     return sim.call(lambda: body.vx == 0.0 and body.wz == 0.0 and (body.cmd.vx, body.cmd.wz) == (0.0, 0.0))
+
+
+def wait_each(sim, sent: dict, timeout: float) -> tuple[dict, dict]:
+    """Each instruction once final, and where the simulator had its robot when it was (a robot that ended at
+    its free spot may later be asked to make way by one still coming, and stand back a few centimetres off:
+    a later instruction's doing, in the history under its own words)."""
+    done, said_at, deadline = {}, {}, time.monotonic() + timeout
+    while len(done) < len(sent) and time.monotonic() < deadline:
+        for name, instruction in sent.items():
+            if name not in done:
+                instruction.refresh_from_db()
+                if instruction.is_final:
+                    done[name], said_at[name] = instruction, sim.pose(name)
+        time.sleep(0.05)
+    assert len(done) == len(sent), {
+        name: (i.status, i.outcome) for name, i in sent.items() if name not in done
+    }
+    return done, said_at

@@ -4,7 +4,6 @@ for every robot sent to one place at once (issue 31). Ground truth is the simula
 import itertools
 import math
 import re
-import time
 
 import pytest
 
@@ -13,7 +12,7 @@ from fleetcore.outcomes import TOLERANCE_M
 from fleetcore.traffic import compass
 from simworker.testing import running_world
 from tests.execution.conftest import register
-from tests.execution.helpers import parse, step
+from tests.execution.helpers import parse, step, wait_each
 
 pytestmark = [pytest.mark.slow]
 
@@ -40,24 +39,6 @@ def said_matches_pose(words: str, pose, others: list[str]) -> None:
     assert abs(float(found["d"]) - math.dist(here, A)) <= 0.1, (words, here)
     assert found["dir"] == compass(A, here) and found["by"] in others, (words, here)
     assert math.dist(here, A) > TOLERANCE_M
-
-
-def wait_each(sim, sent: dict, timeout: float) -> tuple[dict, dict]:
-    """Each instruction once final, and where the simulator had its robot when it was (a robot that ended at
-    its free spot may later be asked to make way by one still coming, and stand back a few centimetres off:
-    a later instruction's doing, in the history under its own words)."""
-    done, said_at, deadline = {}, {}, time.monotonic() + timeout
-    while len(done) < len(sent) and time.monotonic() < deadline:
-        for name, instruction in sent.items():
-            if name not in done:
-                instruction.refresh_from_db()
-                if instruction.is_final:
-                    done[name], said_at[name] = instruction, sim.pose(name)
-        time.sleep(0.05)
-    assert len(done) == len(sent), {
-        name: (i.status, i.outcome) for name, i in sent.items() if name not in done
-    }
-    return done, said_at
 
 
 def circumscribed(sim, name) -> float:
