@@ -20,7 +20,7 @@ import live
 from execution import driving, traffic, traffic_state
 from execution.link import LinkError
 from execution.make_way import aside, until_passed
-from execution.models import Execution
+from execution.models import Execution, Photo
 from execution.route import reach_radius
 from execution.spots import ground
 from execution.steps import (
@@ -35,7 +35,7 @@ from execution.steps import (
     follow_goal,
     travel_time,
 )
-from fleetcore import motion, outcomes
+from fleetcore import actions, images, motion, outcomes
 from fleetcore import traffic_tuning as tune
 from fleetcore.speed import Pace
 from fleetcore.states import Event
@@ -48,6 +48,7 @@ STALL_TRIES, BACK_OFF_S = 2, 1.0  # after a stall: back off and plan again (or s
 BACK_REVERSE = 0.25  # of the robot's top speed, backing off
 NEAR_M = 0.3  # m between two robots' reach discs: the other one is what stands in the way
 DOCK_LIMIT_S = 120.0
+PHOTO_WAIT_S = 5.0  # for the camera's next frame (TIAGo's, simulated, comes twice a second)
 STUCK = "robot_stuck"  # the alert kind a stall raises
 
 
@@ -143,8 +144,12 @@ def task(session: Session, step: Step) -> str:
 
 
 def _task(session: Session, step: Step, where: str) -> str:
-    """Do the step's task where the robot stands (`where`, in words: "at A")."""
+    """Do the step's task where the robot stands (`where`, in words: "at A"); a task whose entry names a
+    handler of its own (photograph) is that handler's."""
     name, count = parse_task(step.task or step.action)
+    own = actions.ACTIONS[name].handler
+    if own != "task":
+        return f"{HANDLERS[own](session, step)} {where}"
     Robot.objects.transition(
         session.robot.pk, Event.WORK, f"{name} {where}", session.execution.instruction_id
     )
@@ -175,6 +180,21 @@ def dock(session: Session, step: Step) -> str:
     x0, y0, _ = robot.start_pose or (0.0, 0.0, 0.0)
     ending = _arrive(session, Destination("its start pose", x0, y0), step.pace(session.link.limits()))
     return f"{ending.words} (no docking action bound)"
+
+
+def photograph(session: Session, step: Step) -> str:
+    """Take the next frame of the robot's camera and keep it with the execution (Photo); nothing moves."""
+    robot = session.robot
+    Robot.objects.transition(robot.pk, Event.WORK, "taking a photo", session.execution.instruction_id)
+    try:
+        image = images.from_message(session.link.photo(PHOTO_WAIT_S, between=session.check))
+    except (LinkError, images.FrameError) as exc:
+        raise StepFailed(f"{robot.name}: no photo ({str(exc).removeprefix(robot.name + ': ')})") from exc
+    Photo.objects.create(
+        execution=session.execution, image=image.data, format=image.format, width=image.width,
+        height=image.height, topic=session.link.camera.target,
+    )  # fmt: skip
+    return f"took a photo ({image.width}×{image.height} {image.format.upper()})"
 
 
 def move_by(session: Session, step: Step) -> str:
@@ -388,7 +408,7 @@ def back_off(session: Session, limits: motion.Limits) -> None:
 
 HANDLERS: dict[str, Callable[[Session, Step], str]] = {
     handler.__name__: handler
-    for handler in (go_to, task, dock, make_way, report_position, move_by, turn_by, wait, repeat)
+    for handler in (go_to, task, dock, make_way, report_position, move_by, turn_by, wait, repeat, photograph)
 }  # the functions the registry's entries name (fleetcore.actions.Action.handler)
 
 

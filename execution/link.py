@@ -25,6 +25,8 @@ from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, CommandSurface
 from robots.models import Robot
 from robots.rosbridge import sync
 
+PHOTO_TICK_S = 0.25  # waiting for a camera frame, the session is checked this often (stops, its heartbeat)
+
 
 class LinkError(RuntimeError):
     """The robot cannot be commanded: no binding for the action, or the endpoint is down."""
@@ -100,6 +102,7 @@ class RobotLink:
         if self.odometry is None:
             raise LinkError(f"{robot.name}: no odometry topic is bound; choose one on its registration page")
         self.amcl = bound.get("pose")
+        self.camera = bound.get("camera")
         self.nav_kind = self.surface.nav_kind
         self.start = tuple(robot.start_pose) if robot.start_pose else (0.0, 0.0, 0.0)
         self.local = None  # the last odometry pose, in the odometry frame
@@ -168,6 +171,29 @@ class RobotLink:
     def next_pose(self, seen: int, timeout: float = 1.0):
         """((x, y, yaw) on the map, counter) after the next odometry message; (None, seen) on timeout."""
         return self.poses.next(seen, timeout)
+
+    # ----- camera -----
+    def photo(self, timeout: float, between=None) -> dict:
+        """The next frame on the robot's camera binding (the message as rosbridge gives it), from a subscription
+        of its own held only till then; `between()` is called every PHOTO_TICK_S meanwhile (the session's check:
+        a stop ends the wait). LinkError when no camera is bound or no frame comes within `timeout` s."""
+        camera = self.camera
+        if camera is None:
+            raise LinkError(f"{self.robot.name}: no camera topic is bound")
+        frame = Latest()
+        sub = self.client.subscribe(camera.target, camera.message_type, frame.put, queue_length=1)
+        try:
+            until = time.monotonic() + timeout
+            while (left := until - time.monotonic()) > 0:
+                message, _ = frame.next(0, min(PHOTO_TICK_S, left))
+                if message is not None:
+                    return message
+                if between is not None:
+                    between()
+        finally:
+            with contextlib.suppress(Exception):  # the link may be down; nothing else to release
+                self.client.unsubscribe(sub)
+        raise LinkError(f"{self.robot.name}: no frame from {camera.target} within {timeout:g} s")
 
     # ----- commands -----
     def velocity(self, v: float, w: float) -> None:

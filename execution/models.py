@@ -4,6 +4,7 @@ from datetime import timedelta
 
 from django.conf import settings
 from django.db import models
+from django.urls import reverse
 from django.utils import timezone
 
 from places.models import Location
@@ -135,6 +136,11 @@ class Instruction(models.Model):
     def is_final(self) -> bool:
         return self.status in self.FINAL
 
+    def photo_urls(self) -> list[str]:
+        """Where to see the photos its robots took (the photograph action), oldest first."""
+        photos = Photo.objects.filter(execution__instruction=self).only("pk")
+        return [photo.get_absolute_url() for photo in photos]
+
 
 class ExecutionQuerySet(models.QuerySet):
     WAITING = ("queued", "preempted")
@@ -232,3 +238,28 @@ class Execution(models.Model):
         """What the alerts call this execution: whatever befalls it (a stall, the failure it ends in, its executor
         lost) is one event, one alert (alerts.raise_alert)."""
         return f"execution {self.pk}"
+
+
+class Photo(models.Model):
+    """A frame a robot's camera took for an instruction (the photograph action), kept as the image itself."""
+
+    execution = models.ForeignKey(Execution, on_delete=models.CASCADE, related_name="photos")
+    image = models.BinaryField(help_text="the PNG or JPEG, as a browser shows it")
+    format = models.CharField(max_length=4, help_text="png or jpeg")
+    width = models.PositiveIntegerField()
+    height = models.PositiveIntegerField()
+    topic = models.CharField(max_length=255, help_text="the camera topic it came from")
+    taken_at = models.DateTimeField(default=timezone.now)
+
+    class Meta:
+        ordering = ["taken_at", "pk"]
+
+    def __str__(self):
+        return f"{self.execution.robot} #{self.execution.instruction_id} {self.width}×{self.height} {self.format}"
+
+    def get_absolute_url(self) -> str:
+        return reverse("photo", args=[self.pk])
+
+    @property
+    def content_type(self) -> str:
+        return f"image/{self.format}"

@@ -78,6 +78,12 @@ ACTIONS: dict[str, Action] = {
             description="clean where it is or at a destination",
         ),
         Action(
+            "photograph", "task", State.WORK, "photograph", (("camera",),),
+            synonyms=("take a photo", "take a picture", "take a photograph", "take a snapshot", "snap a photo",
+                      "snap a picture", "snap", "capture", "photo", "picture", "snapshot"),
+            description="take a photo with the robot's camera, where it stands (kept with the instruction)",
+        ),
+        Action(
             "stop", "control", State.READY, None,
             synonyms=("halt", "freeze", "cease", "pause", "stand still", "emergency stop", "e stop",
                       "hold on"),

@@ -109,6 +109,15 @@ ROLES: dict[str, Role] = {
             "charger charging_station",
             "the robot's own docking action server",
         ),
+        _role(
+            "camera",
+            "sensor_msgs/CompressedImage sensor_msgs/Image",
+            "pub",
+            "camera/image_raw/compressed camera/image_raw image_raw/compressed image_raw image_color",
+            "camera image rgb xtion",
+            "photo picture cam",
+            "a colour camera's frames (what a photo is taken from)",
+        ),
     )
 }  # fmt: skip
 

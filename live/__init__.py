@@ -50,6 +50,7 @@ class InstructionUpdate(TypedDict, total=False):
     status: str
     outcome: str
     expired: bool  # a question nobody answered in time: the console drops it from Progress
+    photos: list[str]  # where to see the photos its robots took (a finished instruction's), oldest first
 
 
 class QueueEntry(TypedDict):
@@ -154,6 +155,7 @@ def instruction(instruction) -> None:
             status=instruction.status,
             outcome=instruction.outcome,
             expired=bool(getattr(instruction, "expired", False)),
+            photos=instruction.photo_urls() if instruction.is_final else [],
         ),
     )
 

@@ -15,6 +15,7 @@ urlpatterns = [
     path("register/bindings/<int:pk>/", views.choose_binding, name="choose-binding"),
     path("schedules/", views.schedules, name="schedules"),
     path("history/", views.history, name="history"),
+    path("photos/<int:pk>/", views.photo, name="photo"),
     path("audit/", views.audit, name="audit"),
     path("alerts/", views.alerts, name="alerts"),
     path("experiments/", views_experiments.experiments, name="experiments"),

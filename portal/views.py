@@ -9,7 +9,7 @@ import json
 from django.conf import settings
 from django.contrib import messages
 from django.core.paginator import Paginator
-from django.http import Http404, JsonResponse
+from django.http import Http404, HttpResponse, JsonResponse
 from django.shortcuts import get_object_or_404, redirect, render
 
 from access import holds, leases
@@ -17,7 +17,7 @@ from access.roles import may, requires
 from alerts.models import Alert
 from audit.models import AuditEntry
 from execution import fast_stop
-from execution.models import Instruction, TimeSlot
+from execution.models import Instruction, Photo, TimeSlot
 from fleetcore.world import WorldFormatError, load_world
 from places.models import Location, Map
 from portal import exports, snapshots
@@ -265,6 +265,15 @@ def history(request):
         "query": _query_without_page(request),
     }
     return render(request, "fleet/history.html", context)
+
+
+@requires("view")
+def photo(request, pk: int):
+    """A photo a robot took for an instruction (execution.models.Photo), as the image itself."""
+    picture = _get_or_404(Photo, pk)
+    response = HttpResponse(bytes(picture.image), content_type=picture.content_type)
+    response["Cache-Control"] = "private, max-age=86400"  # a photo never changes; only its viewers see it
+    return response
 
 
 def _query_without_page(request) -> str:

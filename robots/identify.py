@@ -11,9 +11,12 @@ linear in the number of topics, not the paper's O(n^4)), then a score adds up:
   odom, scan, map...) or of the database's TopicKeyword rows: how = pattern;
 - +0.05 for an ontology synonym of the action in the name: how = synonym;
 - graph facts: for odometry +0.25 when the robot's navigation stack subscribes to it (Husky: the EKF's
-  /odometry/filtered over the controller's raw odometry); for move, the twist_mux rule below. The best candidate is bound with confidence = min(1, score). A tie, or no candidate
+  /odometry/filtered over the controller's raw odometry); for move, the twist_mux rule below; for camera, +0.25
+  for a .../compressed frame (TIAGo's /xtion/rgb/image_raw/compressed over its raw image), -0.3 for a depth
+  image. The best candidate is bound with confidence = min(1, score). A tie, or no candidate
   for move or odometry, binds nothing: needs_user, with the candidates kept for a person. Optional actions
-  (navigate, pose, scan, map, initial_pose, battery, dock) with no candidate are simply absent, not a question.
+  (navigate, pose, scan, map, initial_pose, battery, dock, camera) with no candidate are simply absent, not a
+  question.
 - An action server whose type is a role's own (dock: irobot_create_msgs/action/Dock) scores as a topic would.
 
 twist_mux rule (move). A node that subscribes two or more velocity topics and publishes one is a mux.
@@ -184,7 +187,13 @@ def _map_facts(name: str, facts: Facts) -> float:
     return -0.3 if "costmap" in name else 0.0
 
 
-FACT_RULES = {"move": _move_facts, "odometry": _odometry_facts, "map": _map_facts}
+def _camera_facts(name: str, facts: Facts) -> float:
+    """A camera's image_transport compressed form before its raw frames (a browser shows it as it comes, at a
+    fraction of the size); a depth image is no photo."""
+    return (0.25 if name.endswith("/compressed") else 0.0) - (0.3 if "depth" in name.lower() else 0.0)
+
+
+FACT_RULES = {"move": _move_facts, "odometry": _odometry_facts, "map": _map_facts, "camera": _camera_facts}
 
 
 def candidates(graph: Graph, vocab: Vocabulary) -> dict[str, list[Candidate]]:

@@ -1,7 +1,8 @@
 """Which topics show a robot's sensors on its page: its battery, its laser scan, its camera and its diagnostics.
 
-The battery and the scan are the robot's bindings (fleetcore.bindings roles); a camera is any topic of its
-graph that carries sensor_msgs/CompressedImage (what a browser can show as it comes: a JPEG or PNG).
+The battery, the scan and the camera are the robot's bindings (fleetcore.bindings roles) where it has them. The
+page's camera shows sensor_msgs/CompressedImage only (what a browser can show as it comes: a JPEG or PNG): a
+camera bound to raw frames, or none bound, shows the first compressed topic of the robot's graph instead.
 """
 
 from __future__ import annotations
@@ -27,14 +28,16 @@ def feeds(robot) -> dict[str, Feed]:
     bound = {b.action: b for b in robot.bindings.all() if b.target}
     out = {
         role: Feed(bound[role].target, bound[role].message_type)
-        for role in ("battery", "scan")
+        for role in ("battery", "scan", "camera")
         if role in bound
     }
+    if out.get("camera") and out["camera"].type not in CAMERA_TYPES:
+        del out["camera"]  # raw frames: a photo can be taken from them, a browser cannot show them
     topics = list(
         robot.topics.filter(type__in=CAMERA_TYPES + SCAN_TYPES + DIAGNOSTICS_TYPES).order_by("name")
     )
     camera = next((t for t in topics if t.type in CAMERA_TYPES), None)
-    if camera is not None:
+    if "camera" not in out and camera is not None:
         out["camera"] = Feed(camera.name, camera.type)
     scan = next((t for t in topics if t.type in SCAN_TYPES), None)
     if "scan" not in out and scan is not None:

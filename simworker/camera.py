@@ -3,15 +3,13 @@
 Stands in for a robot's head camera (e.g. TIAGo's Xtion, /xtion/rgb/image_raw/compressed) so a camera panel can
 be tested without Gazebo: walls and robots in front are drawn as columns whose height falls with their
 distance, over a sky and a floor; a block runs along the top edge, one step per frame, so every frame differs.
-Plain Python (zlib and struct): no imaging library.
+Plain Python (fleetcore.images writes the PNG): no imaging library.
 """
 
 from __future__ import annotations
 
-import struct
-import zlib
-
 from fleetcore.catalog import Laser
+from fleetcore.images import png
 
 WIDTH, HEIGHT = 160, 120
 RAYS = Laser("camera", "xtion_rgb_optical_frame", 80, -0.5, 0.5, 0.05, 10.0, 2.0)  # 57° across, as the Xtion
@@ -44,18 +42,3 @@ def render(ranges: list[float | None], frame: int) -> bytes:
             start = 1 + y * (WIDTH * 3 + 1) + mark * 3
             rows[start : start + 24] = MARK * 8
     return png(WIDTH, HEIGHT, bytes(rows))
-
-
-def png(width: int, height: int, rows: bytes) -> bytes:
-    """An 8-bit RGB PNG from its rows (each led by its filter byte)."""
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(rows, 6))
-        + chunk(b"IEND", b"")
-    )

@@ -14,6 +14,18 @@ function cancelButton(id) {
   return b;
 }
 
+// A photo a robot took for the instruction (the photograph action): a thumbnail that opens the frame itself.
+function photoLink(url) {
+  const link = document.createElement("a");
+  link.href = url;
+  const img = document.createElement("img");
+  img.src = url;
+  img.alt = "photo";
+  img.className = "thumb";
+  link.append(img);
+  return link;
+}
+
 // The robots of a step in words: names; "all" -> "every robot"; none named ("any") -> "a robot the portal
 // chooses" (its answer says whom and why); a subject chosen by kind: {"any": true, "model": "turtlebot"} ->
 // "a turtlebot the portal chooses", {"all": true, "except": ["husky"]} -> "every robot except husky".
@@ -160,10 +172,10 @@ export class Console {
   }
 
   track(instruction) {
-    this.line(instruction.id, `#${instruction.id} ${instruction.text}`, instruction.status, instruction.outcome);
+    this.line(instruction.id, `#${instruction.id} ${instruction.text}`, instruction.status, instruction.outcome, instruction.photos);
   }
 
-  line(id, text, status, outcome) {
+  line(id, text, status, outcome, photos = []) {
     let li = this.progress.querySelector(`li[data-instruction="${id}"]`);
     if (!li) {
       li = document.createElement("li");
@@ -176,6 +188,7 @@ export class Console {
     badge.textContent = status;
     li.append(badge);
     if (outcome) li.append(` ${outcome}`);
+    for (const url of photos || []) li.append(" ", photoLink(url));
     if (OPEN.includes(status) && canControl()) li.append(" ", cancelButton(id)); // the task list's cancel, here too
     const parseBadge = document.querySelector(`#parse-${id} .badge`);
     if (parseBadge) { parseBadge.textContent = status; parseBadge.className = `badge status-${status}`; }
@@ -183,7 +196,7 @@ export class Console {
 
   instructionUpdate(message) {
     if (message.expired) { this.expire(message); return; }
-    this.line(message.id, `#${message.id} ${message.text}`, message.status, message.outcome);
+    this.line(message.id, `#${message.id} ${message.text}`, message.status, message.outcome, message.photos);
   }
 
   // A question nobody answered in time (execution/sweeps.py): gone from Progress with its robots' lines; its
