@@ -118,9 +118,10 @@ def fresh_channel_layer():
     channel_layers.backends.clear()
 
 
-@pytest.fixture
-def seeded_ontology(transactional_db):
-    """The interpreter's seed terms (a transactional test before this one flushed the migration's rows)."""
+def seed_ontology() -> None:
+    """The interpreter's seed terms, where they are missing: the migration wrote them, but a transactional test
+    flushes every table at its end, so a test that a transactional one ran before in the same process (which
+    one does depends on the order, and under pytest-xdist on the worker) finds none."""
     import importlib
 
     from django.apps import apps
@@ -129,3 +130,9 @@ def seeded_ontology(transactional_db):
 
     importlib.import_module("interpreter.migrations.0002_seed_terms").seed(apps, None)
     versions.bump_ontology()
+
+
+@pytest.fixture
+def seeded_ontology(transactional_db):
+    """The interpreter's seed terms, for a transactional test (seed_ontology)."""
+    seed_ontology()

@@ -18,7 +18,7 @@ from celery import Celery
 from fleet import embedded_redis
 from fleet.env import celery_broker_url
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
+pytestmark = [pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(180)]
 
 BASE_DIR = Path(__file__).resolve().parents[2]
 WAIT = 60.0  # s for a worker to start, or to take a task once Redis is back (a busy machine)

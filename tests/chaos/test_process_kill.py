@@ -26,7 +26,7 @@ from execution.models import Instruction
 from fleet.supervision import START_SECONDS
 from tests.chaos.system import Odometry, Requests, RunningSystem, alive, send_frames
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
+pytestmark = [pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(300)]
 
 # In an order that keeps every drive short (under 2 m): the turtlebot leaves its start pose on the first and the
 # last fault, which stop it on the way.

@@ -20,7 +20,7 @@ import pytest
 
 from tests.chaos.system import STOP_TIMEOUT, RunningSystem, alive
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+pytestmark = [pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(600)]
 
 ALERT_WITHIN = 2.0  # s from a hung links process to its alert (issue 31)
 GONE_WITHIN = 5.0  # s from kill -9 of supervisord to no process of the run left (issue 30)

@@ -19,7 +19,7 @@ import redis
 from deploy.cluster import address
 from deploy.cluster_client import Odometry, Portal
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(420)]
+pytestmark = [pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(420)]
 
 FINAL = {"succeeded", "failed", "cancelled", "refused", "answered"}
 EXEC_HOST_DEADLINE_S = 10.0  # issue 19: a lost executor host's robots at rest and instructions settled within

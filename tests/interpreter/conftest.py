@@ -8,6 +8,7 @@ from django.core.cache import cache
 from interpreter import versions
 from interpreter.lexicon import Fleet, Grammar, Lexicon, Place, RobotInfo
 from interpreter.terms import seed_terms
+from tests.conftest import seed_ontology
 
 ROBOTS = [
     ("turtlebot", "turtlebot3_burger", "wheeled"),
@@ -51,9 +52,11 @@ def fresh_store():
 
 @pytest.fixture
 def paper_world(db, fresh_store):
-    """The demo world "paper" as Robot and Location rows (seeded ontology comes from the migration)."""
+    """The demo world "paper" as Robot and Location rows, and the seed ontology (tests.conftest.seed_ontology)."""
     from places.models import Location, Map
     from robots.models import Robot
+
+    seed_ontology()
 
     for i, (name, model, drive) in enumerate(ROBOTS):
         Robot.objects.create(name=name, model=model, drive=drive, endpoint=f"ws://127.0.0.1:{9090 + i}")
