@@ -12,8 +12,25 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Annotated, Literal, TypedDict
 
 NAMES, ALL, ANY = "names", "all", "any"  # exactly these; every free robot; the one best robot (allocation)
+
+# The wire form, declared once (the API's schema is generated from it, portal/interpretation_schema.py): a list of
+# names, "all", "any" (None: any), or the subject object for a kind or an exclusion ("except" is a keyword, hence
+# the functional form).
+SubjectWire = TypedDict(
+    "SubjectWire",
+    {
+        "all": Annotated[bool, "true: every robot of the kind"],
+        "any": Annotated[bool, "true: the one best robot of the kind (the portal chooses)"],
+        "model": Annotated[str | None, 'a kind word: "turtlebot", "legged"'],
+        "except": Annotated[list[str], "the robots left out, by name"],
+    },
+    total=False,
+)
+SubjectWire.__doc__ = """All or any robots of a kind ("model": a kind word), but those "except" names."""
+RobotsWire = list[str] | Literal["all", "any"] | SubjectWire | None
 
 
 class ChoiceError(ValueError):
@@ -56,7 +73,7 @@ class RobotChoice:
         kind, exclude = value.get("model") or None, value.get("except") or []
         if (
             len(modes) != 1
-            or set(value) - {ALL, ANY, "model", "except"}
+            or set(value) - SubjectWire.__optional_keys__
             or not (kind is None or isinstance(kind, str))
             or not (isinstance(exclude, list) and all(isinstance(name, str) and name for name in exclude))
         ):
@@ -65,7 +82,7 @@ class RobotChoice:
             )
         return cls(modes[0], (), kind, tuple(exclude))
 
-    def to_wire(self) -> list[str] | str | dict:
+    def to_wire(self) -> RobotsWire:
         """Its JSON form: names as a list, "all", "any", or the subject object for a kind or an exclusion."""
         if self.mode == NAMES:
             return list(self.names)

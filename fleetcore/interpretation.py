@@ -2,7 +2,8 @@
 
 The parser produces it; `submit`, dispatch, the questions' answers, the API, the scheduler and make-way read it.
 It is a dict only at the edges: `to_dict` for what is stored (`Instruction.parse`) and sent to browsers, and
-`from_dict` for what comes back (a stored parse, an API caller's, make-way's). The steps stay in the step
+`from_dict` for what comes back (a stored parse, an API caller's, make-way's); `wire_form` says the keys and their
+types once, and the API's schema is generated from it (portal/interpretation_schema.py). The steps stay in the step
 contract's wire form until `checked` (a type III-V instruction's steps may have no action or no position, so
 they cannot all be `fleetcore.steps.Step`s); who each step is for is read through `choices` (one
 `RobotChoice`), and "is it a stop", "is it a question", "which robots does a stop name" are decided here once.
@@ -11,35 +12,50 @@ they cannot all be `fleetcore.steps.Step`s); who each step is for is read throug
 from __future__ import annotations
 
 import copy
+import functools
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from types import MappingProxyType
+from typing import Literal, get_args, get_type_hints
 
 from fleetcore import steps as step_contract
 from fleetcore.actions import ACTIONS
 from fleetcore.choice import ALL, ChoiceError, RobotChoice
 
-TYPES = (
-    "I",
-    "II",
-    "III",
-    "IV",
-    "V",
-)  # the paper's Table 9: I, II understood (II: through synonyms); III-V ask
+# The paper's Table 9: I, II understood (II: through synonyms); III-V ask.
+Type = Literal["I", "II", "III", "IV", "V"]
+TYPES = get_args(Type)
 EVERY = ALL  # what a stop naming no robot (or every robot) stops
+
+
+def _says(doc: str, wire: bool = True) -> dict:
+    """A field's metadata: what it says on the wire (the API schema's description), or that it stays off it."""
+    return {"doc": doc, "wire": wire}
 
 
 @dataclass(frozen=True)
 class Interpretation:
     """The paper's type, the steps (wire form), why, and for types III-V the question and an answer's example."""
 
-    type: str
-    steps: tuple[dict, ...] = ()
-    reason: str = ""
-    question: str | None = None
-    answer_example: str | None = None
-    synonyms_used: Mapping[str, str] = field(default_factory=dict)
-    read_back: tuple[str, ...] = ()  # each step in words (interpreter.forms.read_back): the console's lines
-    problems: tuple = field(default=(), compare=False, repr=False)  # the parser's, for what a question asked
+    type: Type = field(
+        metadata=_says("I, II: understood (II: through synonyms); III-V: a question to answer")
+    )
+    steps: tuple[step_contract.StepWire, ...] = field(
+        default=(), metadata=_says("the steps, in the step contract's wire form")
+    )
+    reason: str = field(default="", metadata=_says("why it was read so, or what is missing"))
+    question: str | None = field(default=None, metadata=_says("types III-V: what the person is asked"))
+    answer_example: str | None = field(default=None, metadata=_says("types III-V: an answer that would do"))
+    synonyms_used: Mapping[str, str] = field(
+        default_factory=dict, metadata=_says("each word read as another: {word: the word it means}")
+    )
+    read_back: tuple[str, ...] = field(  # (interpreter.forms.read_back): the console's lines
+        default=(), metadata=_says("each step in words, in the order of steps")
+    )
+    problems: tuple = field(  # the parser's, for what a question asked
+        default=(), compare=False, repr=False, metadata=_says("", wire=False)
+    )
+    WIRE_PROPERTIES = ("valid", "needs_user")  # decided here, sent with the fields (to_dict)
 
     # --- the one constructor for an instruction the portal writes itself -------------------------------
 
@@ -71,19 +87,21 @@ class Interpretation:
 
     # --- the edges: stored JSON and the wire -------------------------------------------------------------
 
+    @classmethod
+    @functools.cache
+    def wire_form(cls) -> Mapping[str, tuple[object, str]]:
+        """Each key of `to_dict` with its type and what it says: the fields on the wire, then WIRE_PROPERTIES.
+        The API's schema is generated from it (portal/interpretation_schema.py), so the two cannot differ."""
+        hints = get_type_hints(cls)
+        form = {f.name: (hints[f.name], f.metadata["doc"]) for f in fields(cls) if f.metadata["wire"]}
+        for name in cls.WIRE_PROPERTIES:
+            prop = getattr(cls, name)
+            form[name] = (get_type_hints(prop.fget)["return"], prop.__doc__ or "")
+        return MappingProxyType(form)
+
     def to_dict(self) -> dict:
         """The JSON shape of the interpreter's API, of `Instruction.parse` and of the console's parse."""
-        return {
-            "type": self.type,
-            "valid": self.valid,
-            "needs_user": self.needs_user,
-            "question": self.question,
-            "steps": copy.deepcopy(list(self.steps)),
-            "read_back": list(self.read_back),
-            "synonyms_used": dict(self.synonyms_used),
-            "reason": self.reason,
-            "answer_example": self.answer_example,
-        }
+        return {name: _plain(getattr(self, name)) for name in self.wire_form()}
 
     @classmethod
     def from_dict(cls, data: Mapping) -> Interpretation:
@@ -110,10 +128,12 @@ class Interpretation:
 
     @property
     def valid(self) -> bool:
+        """Understood (types I, II): it can run."""
         return self.type in ("I", "II")
 
     @property
     def needs_user(self) -> bool:
+        """Not understood (types III-V): it waits for the person's answer to the question."""
         return not self.valid
 
     @property
@@ -166,6 +186,13 @@ class Interpretation:
             else:
                 names |= set(choice.names)
         return names
+
+
+def _plain(value):
+    """A field as JSON takes it: tuples as lists, mappings as dicts, the steps copied (never shared)."""
+    if isinstance(value, tuple):
+        return copy.deepcopy(list(value))
+    return dict(value) if isinstance(value, Mapping) else value
 
 
 def _choice(step) -> RobotChoice | None:

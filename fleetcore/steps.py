@@ -14,10 +14,11 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import asdict, dataclass
+from typing import Annotated, TypedDict
 
 from fleetcore import actions
 from fleetcore import speed as speeds  # (a Step's field is named speed)
-from fleetcore.choice import ChoiceError, RobotChoice
+from fleetcore.choice import ChoiceError, RobotChoice, RobotsWire
 
 # Unit words -> (unit, factor to it). The interpreter's phrases of amounts map onto these, the handlers read the
 # unit of their action (fleetcore.actions.Action.unit).
@@ -126,6 +127,41 @@ def _point(value) -> tuple[float, float] | None:
     return (x, y) if math.isfinite(x) and math.isfinite(y) else None
 
 
+# The wire form of a step, declared once: what the interpreter writes (a type III-V step may have no action and
+# a destination with no position), what `Step.from_dict` reads and `Step.to_dict` writes, and what the API's schema
+# is generated from (portal/interpretation_schema.py; a key's string is its description there). Every writer
+# writes the keys of the first class; the second's only when they say something.
+class _DestinationKeys(TypedDict):
+    name: Annotated[str, "the place's name; a point's is its coordinates"]
+    x: Annotated[float | None, "m, map frame; null: a place the interpreter does not know"]
+    y: Annotated[float | None, "m, map frame"]
+
+
+class DestinationWire(_DestinationKeys, total=False):
+    """Where to: a place on the map, or a free spot next to it."""
+
+    yaw: Annotated[float | None, "rad, map frame: the heading to end with"]
+    around: Annotated[str | None, "the place asked for, when the robot was given a free spot next to it"]
+    center: Annotated[list[float] | None, "[x, y] of that place"]
+    taken_by: Annotated[str | None, "who took that place: a robot, or a robot's goal"]
+
+
+class _StepKeys(TypedDict):
+    action: Annotated[str | None, "fleetcore.actions; null: a verb not understood (types III-V)"]
+    robots: Annotated[RobotsWire, 'names, "all", "any" (null: any), or a kind or an exclusion']
+    destination: DestinationWire | None
+    task: Annotated[str | None, '"rotate(3)", "clean"']
+    speed: Annotated[str | None, "a speed word (fleetcore.speed)"]
+
+
+class StepWire(_StepKeys, total=False):
+    """One action for some robots, as it travels (JSON in the database, the API and the socket)."""
+
+    amount: Annotated[float, "in the unit of the action: m, deg, s, or times for a repeat"]
+    span: Annotated[int, "repeat: how many steps before it it repeats"]
+    instruction: Annotated[int, 'cancel: the instruction it takes back ("cancel #12")']
+
+
 @dataclass(frozen=True)
 class Step:
     action: str
@@ -178,7 +214,7 @@ class Step:
     def to_dict(self) -> dict:
         out = asdict(self)
         out["robots"] = self.robots.to_wire()
-        for key in ("amount", "span"):
+        for key in StepWire.__optional_keys__ & out.keys():  # written only when they say something
             if out[key] is None:
                 del out[key]
         for key in ("center", "taken_by"):  # (kept only for a free spot next to a place)

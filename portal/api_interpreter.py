@@ -18,6 +18,7 @@ from interpreter import service
 from interpreter.lessons import parse_answer
 from interpreter.models import Lesson
 from portal.api_types import Id, Text
+from portal.interpretation_schema import InterpretationOut
 
 router = Router(tags=["interpreter"])
 
@@ -31,13 +32,29 @@ class TeachIn(Schema):
     instruction_id: Id | None = None
 
 
-@router.post("/interpret")
+class TeachOut(Schema):
+    """What a lesson taught (interpreter.service.teach); when refused, ok is false with the message and examples."""
+
+    ok: bool
+    message: str
+    examples: list[str] = Field(None, description="answers that would do (when refused)")
+    kind: str = Field(None, description="synonym, not_a_place, location, forget")
+    word: str = Field(None, description="the word taught")
+    meaning: str = Field(None, description="what it means now")
+    lesson_id: int = Field(None, description="the stored lesson")
+    ontology_version: int = Field(None, description="the ontology's version after the lesson")
+    instruction: InterpretationOut = Field(
+        None, description="the instruction answered (instruction_id), read again with what was taught"
+    )
+
+
+@router.post("/interpret", response=InterpretationOut)
 def interpret(request, body: InterpretIn):
     """Interpret an instruction without running it."""
     return service.interpret(body.text).to_dict()
 
 
-@router.post("/teach", auth=api_auth("teach"))
+@router.post("/teach", response=TeachOut, auth=api_auth("teach"), exclude_unset=True)
 def teach(request, body: TeachIn):
     """Teach the ontology from a person's answer to a question (forgetting a seeded word: admins only)."""
     _refuse_forgetting_seeded(request.user, body.answer)

@@ -3,6 +3,10 @@
 from datetime import datetime
 
 from ninja import Field, Schema
+from pydantic import field_validator
+
+from fleetcore.interpretation import Interpretation
+from portal.interpretation_schema import InterpretationOut
 
 
 class InstructionOut(Schema):
@@ -15,7 +19,7 @@ class InstructionOut(Schema):
     )
     type: str
     status: str
-    parse: dict
+    parse: InterpretationOut | None = Field(description="how it was read; null before it was")
     outcome: str
     error: str
     received_at: datetime
@@ -24,6 +28,12 @@ class InstructionOut(Schema):
     first_command_at: datetime | None
     motion_started_at: datetime | None
     finished_at: datetime | None
+
+    @field_validator("parse", mode="before")
+    @classmethod
+    def _read(cls, stored):
+        """The stored parse in its current shape (Interpretation.from_dict); an empty one (not read yet): null."""
+        return Interpretation.from_dict(stored).to_dict() if stored else None
 
     @classmethod
     def of(cls, instruction) -> dict:

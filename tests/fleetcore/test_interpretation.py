@@ -1,9 +1,12 @@
 """The one typed interpretation: its JSON edges, and "is it a stop", "which robots" decided on it once."""
 
+from dataclasses import fields
+
 import pytest
 
-from fleetcore.choice import ChoiceError, RobotChoice
+from fleetcore.choice import ChoiceError, RobotChoice, SubjectWire
 from fleetcore.interpretation import EVERY, Interpretation
+from fleetcore.steps import Destination, DestinationWire, StepWire
 
 FLEET = [("husky", "husky", "wheeled"), ("tb1", "turtlebot3_burger", "wheeled"), ("spot", "spot", "legged")]
 
@@ -31,6 +34,25 @@ def test_the_stored_json_comes_back_as_the_same_interpretation(grammar, text):
                            "reason", "answer_example"}  # fmt: skip
     assert Interpretation.from_dict(stored) == understood
     assert Interpretation.from_dict(stored).to_dict() == stored
+
+
+def test_the_wire_forms_declared_once_hold_every_key_written(grammar):
+    """The API's schema is generated from these declarations (portal/interpretation_schema.py): the parser's
+    steps, the checked steps and the robots' subject objects write no key they do not declare."""
+    texts = ["move husky slowly to A", "every robot except husky go to C", "any turtlebot go to B",
+             "move husky forward 2 metres", "patrol A, B and C until stopped", "cancel #12", "zoom husky to A"]  # fmt: skip
+    written = set()
+    for text in texts:
+        understood = _said(text, grammar)
+        assert set(understood.to_dict()) == set(Interpretation.wire_form()), text
+        for step in understood.steps:
+            assert StepWire.__required_keys__ <= set(step), text
+            written |= set(step) | (set(step["robots"]) if isinstance(step["robots"], dict) else set())
+        if understood.valid and not understood.cancels:
+            written |= {key for checked in understood.checked() for key in checked.to_dict()}
+    declared = set(StepWire.__annotations__) | set(SubjectWire.__annotations__)
+    assert written == declared  # each key declared is written by some step, and no other
+    assert {f.name for f in fields(Destination)} == set(DestinationWire.__annotations__)
 
 
 def test_a_stop_is_decided_once_and_names_its_robots(grammar):
