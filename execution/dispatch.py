@@ -197,7 +197,7 @@ def best_of(free: list[Robot], destination) -> tuple[Robot, str, list[str]]:
     Returns the robot, why it in words, and the robots that cannot reach the destination (in words).
     Without a destination: the fullest battery when known, then the name.
     """
-    poses = pose_store.last_poses([robot.pk for robot in free])
+    poses = pose_store.known_poses(free)
     if destination is None:
         robot = min(free, key=lambda r: (-(_battery(r, poses) or 0.0), r.name))
         return robot, _no_place_words(robot, free, poses), []
@@ -262,7 +262,7 @@ def _distance_words(robot: Robot, lengths: dict, start, target) -> str:
 
 
 def _position(robot: Robot, poses: dict) -> tuple[float, float] | None:
-    pose = poses.get(robot.pk) or _start(robot)
+    pose = poses.get(robot.pk)
     return (float(pose["x"]), float(pose["y"])) if pose else None
 
 
@@ -270,11 +270,6 @@ def _battery(robot: Robot, poses: dict) -> float | None:
     """The robot's battery percentage when something reported it (its live pose or its description)."""
     value = (poses.get(robot.pk) or {}).get("battery", robot.description.get("battery"))
     return float(value) if isinstance(value, int | float) else None
-
-
-def _start(robot: Robot) -> dict | None:
-    pose = robot.start_pose
-    return {"x": pose[0], "y": pose[1]} if pose and len(pose) >= 2 else None
 
 
 @dataclass
@@ -311,7 +306,7 @@ def plan(
         raise Refused(str(exc)) from None
     poses = {
         pk: (p["x"], p["y"], p.get("yaw", 0.0))
-        for pk, p in pose_store.last_poses(Robot.objects.values_list("pk", flat=True)).items()
+        for pk, p in pose_store.known_poses(Robot.objects.only("pk", "start_pose")).items()
     }
     chosen: list[str] | None = _selected_names(selected)
     said = False  # whom the page's selection chose has been said

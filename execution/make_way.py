@@ -33,7 +33,7 @@ def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
         return all(plain.segment_distance((x, y), (x, y), a, b) >= clear for a, b in legs)
 
     _, still = traffic.obstacles(coordination.connection(), robot.pk, time.time(), {request["for"]})
-    discs = [plain.Disc(c.a[0], c.a[1], c.r, c.label) for c, _ in still if int(c.label) != request["for"]]
+    discs = [capsule for capsule, _ in still if int(capsule.label) != request["for"]]  # stretches held, whole
     return plain.free_spot(
         tuple(here), radius, discs, is_free, prefer=tuple(here), step=tune.ASIDE_STEP, search_m=tune.ASIDE_SEARCH_M,
         margin=tune.CLAIM_MARGIN + tune.PLAN_MARGIN,

@@ -26,6 +26,7 @@ from execution.steps import Interrupted, LinkLost, Session, StepFailed, advance
 from fleetcore import faults, outcomes
 from fleetcore.states import Event
 from robots import links
+from robots import poses as pose_store
 from robots.models import Robot
 
 log = logging.getLogger(__name__)
@@ -165,12 +166,21 @@ def _held_back(execution: Execution) -> bool:
 
 
 def _halt(link: RobotLink | None) -> None:
+    """The final zero, and the robot's last pose kept where the fleet reads it (robots.poses): the step stored it
+    only every STORE_POSE_EVERY while it ran, so without this the portal could place a robot that has just
+    arrived up to half a second of driving short of where it stands (where no pose hub runs, or one lags),
+    and give a robot sent "to tiago" a spot on the far side of tiago's doorway."""
     if link is None:
         return
     try:
         link.halt()
     except Exception:
         log.warning("%s: could not publish the final zero velocity", link.robot.name)
+    if link.poses.value is not None:
+        try:
+            pose_store.store_pose(link.robot.pk, link.poses.value)
+        except Exception:  # the cache is away: the pose hub (or the next step) keeps it later
+            log.warning("%s: its last pose could not be kept", link.robot.name, exc_info=True)
     link.close()
 
 

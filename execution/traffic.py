@@ -346,7 +346,7 @@ def searches(speed: float) -> list[float]:
 def free_goal(robot: Robot, goal, radius: float, still, planner, start) -> tuple[float, float]:
     """The goal, or the nearest free spot to it when a robot stands too close (one that stopped a little
     short of its own spot, say): where this robot can stop clear of everyone."""
-    discs = [plain.Disc(c.a[0], c.a[1], c.r, c.label) for c, _ in still]
+    discs = [capsule for capsule, _ in still]  # all of a stretch a robot holds, not only where it began
     if plain.clear_of(tuple(goal), radius, discs, 0.05) is None:
         return tuple(goal)
     is_free = lambda x, y: planner.free(*planner.to_cell(x, y))  # noqa: E731

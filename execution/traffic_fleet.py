@@ -36,16 +36,11 @@ def standing(parked: dict[int, dict], exclude: set[int]) -> list[tuple[plain.Cap
     live_poses = pose_store.last_poses(list(others))
     out = []
     for pk, robot in others.items():
-        pose = live_poses.get(pk) or parked.get(pk) or _start(robot)
+        pose = live_poses.get(pk) or parked.get(pk) or pose_store.start_of(robot)
         if pose is not None:
             point = (float(pose["x"]), float(pose["y"]))
             out.append((plain.Capsule(point, point, reach(robot), str(pk)), -math.inf))
     return out
-
-
-def _start(robot: Robot) -> dict | None:
-    pose = robot.start_pose
-    return {"x": pose[0], "y": pose[1]} if pose and len(pose) >= 2 else None
 
 
 def busy_ids() -> set[int]:

@@ -52,11 +52,16 @@ class Disc:
     r: float
     label: str = ""
 
+    def distance(self, point: Point) -> float:
+        """From a point to the disc's centre."""
+        return math.dist(point, (self.x, self.y))
 
-def clear_of(point: Point, radius: float, discs: Iterable[Disc], margin: float = SPOT_MARGIN) -> Disc | None:
-    """The first disc a robot of this radius at point would touch (within margin); None when clear."""
+
+def clear_of(point: Point, radius: float, discs: Iterable[Disc | Capsule], margin: float = SPOT_MARGIN):
+    """The first disc (or capsule: a robot holding a stretch of its way takes all of it) a robot of this radius
+    at point would touch (within margin); None when clear."""
     for disc in discs:
-        if math.dist(point, (disc.x, disc.y)) < radius + disc.r + margin:
+        if disc.distance(point) < radius + disc.r + margin:
             return disc
     return None
 
@@ -64,7 +69,7 @@ def clear_of(point: Point, radius: float, discs: Iterable[Disc], margin: float =
 def free_spot(
     target: Point,
     radius: float,
-    taken: Sequence[Disc],
+    taken: Sequence[Disc | Capsule],
     is_free: Callable[[float, float], bool],
     prefer: Point | None = None,
     step: float = SPOT_STEP,
@@ -140,6 +145,10 @@ class Capsule:
     b: Point
     r: float
     label: str = ""
+
+    def distance(self, point: Point) -> float:
+        """From a point to the capsule's segment."""
+        return _distance(point, self)
 
 
 def _distance(p: Point, capsule: Capsule) -> float:

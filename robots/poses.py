@@ -97,6 +97,33 @@ def last_poses(robot_ids) -> dict[int, dict]:
     return {pose["id"]: pose for pose in _cached(robot_ids) if "x" in pose}
 
 
+def start_of(robot) -> dict | None:
+    """The pose a robot started from (Robot.start_pose: found at registration, or its world's), as a pose."""
+    pose = robot.start_pose
+    if not pose or len(pose) < 2:
+        return None
+    return {
+        "id": robot.pk,
+        "x": float(pose[0]),
+        "y": float(pose[1]),
+        "yaw": float(pose[2]) if len(pose) > 2 else 0.0,
+    }
+
+
+def known_poses(robots) -> dict[int, dict]:
+    """Where each of these robots is as far as the fleet knows: its last pose (last_poses), else where it started
+    (start_of). A robot that has not moved since it was registered, where no pose hub runs or before its first
+    tick, still has a place: dispatch chose the nearest robot by it, and a spot given to it near a taken place
+    is on its side of the place (without one, on the place's east side: "turtlebot to tiago" was given a spot
+    beyond tiago's doorway, which it could not reach)."""
+    robots = list(robots)
+    known = last_poses([robot.pk for robot in robots])
+    for robot in robots:
+        if robot.pk not in known and (start := start_of(robot)) is not None:
+            known[robot.pk] = start
+    return known
+
+
 def pose_faults(robot_ids) -> dict[int, dict]:
     """{robot id: its last pose record} for the robots whose odometry the gate refuses now ("fault", "fault_since")."""
     return {pose["id"]: pose for pose in _cached(robot_ids) if pose.get("fault")}

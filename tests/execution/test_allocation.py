@@ -166,6 +166,23 @@ def test_a_goal_where_a_robot_is_parked_becomes_the_nearest_free_spot(fleet, fle
     assert f"{gap:.1f} m" in instruction.outcome and "west of A" in instruction.outcome
 
 
+def test_a_robot_whose_pose_was_never_kept_is_given_a_spot_on_the_side_it_starts_from(
+    fleet, fleet_admin, no_runner
+):
+    """Where no pose hub runs (or before its first tick) a robot that has not moved since registration has no
+    last pose: it stands where it started, and the spot it gets by a taken place is on that side. (Without a
+    place, the first free spot round the place, east of it, went to a TurtleBot coming from the west, beyond
+    the robot that held the doorway: it could never get there.)"""
+    fleet("parked", 3.0, 4.6, footprint=HUSKY)  # in Room 1's doorway (its door faces west)
+    tb = fleet("tb", -2.0, -0.5)
+    cache.delete(live.POSE_CACHE_KEY.format(id=tb.pk))
+    Robot.objects.filter(pk=tb.pk).update(start_pose=[-2.0, -0.5, 0.0])
+    instruction = submit("move tb to parked", fleet_admin, parse=parse(step(["tb"], 3.0, 4.6, "parked")))
+    goal = Execution.objects.get(instruction=instruction).steps[0]["destination"]
+    assert goal["x"] < 3.0, goal  # outside the room, on tb's side of the doorway
+    assert "west of parked" in instruction.outcome, instruction.outcome
+
+
 def test_two_instructions_to_one_place_never_share_the_spot(fleet, fleet_admin, no_runner):
     """The reported bug: "move tb3_1 to A" then "move tb3_2 to A" ended on one spot."""
     fleet("tb3_1", -2.0, 2.0)

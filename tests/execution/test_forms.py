@@ -100,6 +100,20 @@ def test_move_forward_and_back_by_metres(turtle_world, fleet_admin):
     assert abs(back + 0.5) < 0.1
 
 
+def test_the_fleets_last_pose_of_a_robot_is_where_its_instruction_left_it(turtle_world, fleet_admin):
+    """Where the portal places a robot once its instruction ended is where it came to rest, kept at the end
+    (steps keep it only every half second while they run, and here no pose hub fills in)."""
+    from robots.models import Robot
+    from robots.poses import last_poses
+
+    instruction = run("move turtlebot 1 meter forward", fleet_admin)
+    robot = Robot.objects.get(name="turtlebot")
+    kept, here = last_poses([robot.pk])[robot.pk], pose(turtle_world)
+    ended = instruction.executions.get().finished_at.timestamp()
+    assert kept["t"] >= ended - 0.25, (kept["t"], ended)  # kept as it ended, not during the drive
+    assert math.dist((kept["x"], kept["y"]), here[:2]) < 0.01, (kept, here)
+
+
 def test_turn_left_then_right_by_degrees(turtle_world, fleet_admin):
     start = pose(turtle_world)
     with Track(turtle_world) as track:

@@ -59,6 +59,21 @@ def test_a_free_goal_is_kept_and_a_taken_one_moves_to_the_nearest_free_spot():
     assert spot[0] > 1.0 and traffic.compass((1.0, 1.0), spot) == "east"  # on the side it comes from
 
 
+def test_a_free_spot_keeps_clear_of_the_whole_stretch_a_robot_holds_not_only_where_it_began():
+    """A robot holding a stretch of its way (a claim, a to b) takes all of it: a goal at the stretch's far end
+    is taken, and the spot given instead is clear of the segment (a disc at `a` alone had called the goal
+    free, and a spot beside the stretch's middle free too)."""
+    anywhere = lambda x, y: True  # noqa: E731
+    holding = Capsule((0.0, 0.0), (2.0, 0.0), 0.3, "tiago")
+    assert traffic.clear_of((2.0, 0.0), 0.2, [holding]) is holding
+    assert traffic.clear_of((1.0, 0.6), 0.2, [holding]) is holding  # beside the middle
+    spot = traffic.free_spot((2.0, 0.0), 0.2, [holding], anywhere, prefer=(1.0, 3.0))
+    assert holding.distance(spot) >= 0.2 + 0.3 + traffic.SPOT_MARGIN - 1e-9, spot
+    assert Disc(0.0, 0.0, 0.3).distance(spot) > holding.distance(
+        spot
+    )  # the stretch, not its first end, decided
+
+
 def test_a_free_spot_stands_on_free_ground():
     east_is_wall = lambda x, y: x < 1.2  # noqa: E731
     spot = traffic.free_spot((1.0, 1.0), 0.2, [Disc(1.0, 1.0, 0.3)], east_is_wall, prefer=(3.0, 1.0))
