@@ -110,6 +110,10 @@ def resolve_robots(
     for robot in robots:
         if robot.link_status != Robot.Link.ONLINE:
             raise Refused(f"{robot.name} is {robot.link_status}; it cannot take instructions now.")
+        if unbound := _unbound(robot, step):
+            raise Refused(
+                f"{robot.name} cannot {step.action}: it {unbound}; choose one on its registration page."
+            )
         slot = active_slot(robot, moment) if check_schedule else None
         if slot is not None:
             raise Refused(
@@ -150,9 +154,8 @@ def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) ->
     slots = slots_now(candidates, moment) if check_schedule else {}
     incapable, not_now, free = [], [], []
     for robot in candidates:
-        missing = step.spec.missing({b.action for b in robot.bindings.all() if b.target})
-        if missing:
-            incapable.append(f"{robot.name} has no {' and no '.join(missing)} bound")
+        if unbound := _unbound(robot, step):
+            incapable.append(f"{robot.name} {unbound}")
             continue
         why = _not_free(robot, robot.pk in busy, held.get(robot.pk), user, slots.get(robot.pk))
         (not_now.append(f"{robot.name} {why}") if why else free.append(robot))
@@ -163,6 +166,13 @@ def allocate(step: Step, user=None, moment=None, check_schedule: bool = True) ->
         raise Refused(f"No robot{_of(chosen)} can {step.action} ({detail}).")
     robot, why, unreachable = best_of(free, step.destination)
     return robot, chosen_words([robot.name], why, unreachable + not_now + incapable)
+
+
+def _unbound(robot: Robot, step: Step) -> str:
+    """ "has no camera bound": what the robot lacks for the step's action (fleetcore/actions.py needs), in
+    words; "" when its bindings serve it."""
+    missing = step.spec.missing({b.action for b in robot.bindings.all() if b.target})
+    return f"has no {' and no '.join(missing)} bound" if missing else ""
 
 
 def chosen_words(names: list[str], why: str, passed: list[str] = ()) -> str:

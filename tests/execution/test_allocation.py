@@ -68,6 +68,20 @@ def test_busy_held_and_unbound_robots_are_passed_over_with_the_reason(fleet, fle
     assert "near is busy (motion)" in why and "blind has no odometry or pose bound" in why
 
 
+def test_a_robot_named_for_an_action_it_has_no_binding_for_is_refused_at_once_saying_what_it_lacks(
+    fleet, fleet_admin, no_runner
+):
+    """Not queued to fail when it runs: the same words allocation gives a robot it passes over."""
+    fleet("tb", -2.0, 2.0)
+    photo = {"action": "photograph", "robots": ["tb"], "destination": None, "task": "photograph"}
+    refused = submit("tb, take a photo", fleet_admin, parse=parse(photo))
+    assert refused.status == "refused" and not Execution.objects.filter(instruction=refused).exists()
+    assert refused.outcome == "tb cannot photograph: it has no camera bound; choose one on its registration page."
+    fleet("blind", 4.2, 4.6, roles=("move",))
+    refused = submit("move blind to D", fleet_admin, parse=parse(step(["blind"], *D, "D")))
+    assert refused.status == "refused" and "blind cannot move: it has no odometry or pose bound" in refused.outcome
+
+
 def test_ties_go_to_the_fuller_battery(fleet, fleet_admin):
     low = fleet("low", 0.0, -1.0)
     high = fleet("high", 0.0, 1.0)
