@@ -76,10 +76,16 @@ def test_a_robot_named_for_an_action_it_has_no_binding_for_is_refused_at_once_sa
     photo = {"action": "photograph", "robots": ["tb"], "destination": None, "task": "photograph"}
     refused = submit("tb, take a photo", fleet_admin, parse=parse(photo))
     assert refused.status == "refused" and not Execution.objects.filter(instruction=refused).exists()
-    assert refused.outcome == "tb cannot photograph: it has no camera bound; choose one on its registration page."
+    assert (
+        refused.outcome
+        == "tb cannot photograph: it has no camera bound; choose one on its registration page."
+    )
     fleet("blind", 4.2, 4.6, roles=("move",))
     refused = submit("move blind to D", fleet_admin, parse=parse(step(["blind"], *D, "D")))
-    assert refused.status == "refused" and "blind cannot move: it has no odometry or pose bound" in refused.outcome
+    assert (
+        refused.status == "refused"
+        and "blind cannot move: it has no odometry or pose bound" in refused.outcome
+    )
 
 
 def test_ties_go_to_the_fuller_battery(fleet, fleet_admin):
