@@ -11,7 +11,7 @@ from django.core.exceptions import ValidationError
 
 from audit.models import AppendOnlyError, AuditEntry
 from execution.models import Execution, Instruction
-from robots.models import Robot, robot_name_from, validate_robot_name
+from robots.models import Binding, Robot, robot_name_from, validate_robot_name
 from tests.conftest import PASSWORD
 
 BASE_DIR = Path(__file__).resolve().parents[2]
@@ -239,6 +239,8 @@ def test_click_to_move_sends_robot_ids_and_a_name_is_never_read_as_words(
         link_status=Robot.Link.ONLINE,
         state=Robot.State.READY,
     )
+    for role in ("move", "odometry"):  # a robot that can move (one that cannot is refused at dispatch)
+        Binding.objects.create(robot=odd, action=role, target=f"/odd/{role}")
     place = small_map.locations.get(name="B")
     reply = client_for(operator).post(
         "/api/instructions",

@@ -107,8 +107,8 @@ def test_aliases_of_one_endpoint_register_one_robot_stored_under_its_address(end
 
 
 def test_unreachable_endpoints_do_not_say_which_ports_are_open(endpoint):
-    closed = free_port()
     with HostileEndpoint(topics=lambda call: []) as silent:  # a WebSocket server that never answers
+        closed = free_port()  # picked while the silent one holds its port: never the same one (it was, once)
         results = register_endpoints([f"ws://127.0.0.1:{closed}", silent.url], call_timeout=0.3)
     assert [r.error.split(": ", 1)[1] for r in results] == ["unreachable (no rosbridge server answered)"] * 2
 
