@@ -102,7 +102,7 @@ def resolve_robots(
             )
         return robots, ""
     names = chosen.names
-    found = {robot.name: robot for robot in Robot.objects.filter(name__in=names)}
+    found = {robot.name: robot for robot in Robot.objects.filter(name__in=names).prefetch_related("bindings")}
     missing = [name for name in names if name not in found]
     if missing:
         raise Refused(f"No robot named {', '.join(missing)} is registered.")
