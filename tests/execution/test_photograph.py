@@ -7,6 +7,7 @@ import threading
 
 import pytest
 
+from alerts.models import Alert
 from execution import handlers
 from execution.instructions import submit
 from execution.models import Photo
@@ -15,7 +16,7 @@ from robots.rosbridge import sync
 from simworker import camera
 from simworker.testing import running_world
 from tests.execution.conftest import register
-from tests.execution.helpers import wait_final
+from tests.execution.helpers import wait_final, wait_for
 
 XTION = "/xtion/rgb/image_raw/compressed"
 pytestmark = [pytest.mark.timeout(120), pytest.mark.usefixtures("seeded_ontology")]
@@ -80,6 +81,11 @@ def test_a_camera_that_sends_no_frame_fails_the_step_with_the_reason(tiago_world
     assert done.status == "failed", done.outcome
     assert "tiago: no photo (no frame from /xtion/rgb/silent within 1 s)" in done.outcome
     assert not Photo.objects.exists()
+    # the runner raises the step's alert after the instruction settles: seen, and its write done before the
+    # test's tables are emptied (that write and the teardown's TRUNCATE deadlocked once)
+    failed = Alert.objects.filter(kind="step_failed", robot__name="tiago")
+    alert = wait_for(failed.first, timeout=10, what="the failed step's alert")
+    assert "no photo (no frame from /xtion/rgb/silent within 1 s)" in alert.message
 
 
 def test_a_photo_said_with_a_trip_is_taken_at_the_destination(tiago_world, fleet_admin):
