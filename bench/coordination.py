@@ -1,23 +1,23 @@
 """Fleet coordination in the warehouse world: robots sent at once on crossing routes, and allocation at scale.
 
-`python -m bench.coordination [--quick|--full] [--counts N ...] [--workers K]` writes
+`python -m bench.coordination [--quick|--full] [--counts N ...] [--executors K]` writes
 bench/results/coordination.json:
 {"coordination": {"<n>": {"contacts", "deadlocks", "completion", "makespan_s", "lone_s", "makespan_ratio",
  "failed", "finish_s" (seconds to each robot's end, simulated time), "touched" ([t, robot, robot] each contact),
  "lone_runs" ({robot: makespan_s alone})},
- "allocation_ms_1000": {"p50", "p99"}, "executors": {"workers", "threads", "database"}}, ...}.
+ "allocation_ms_1000": {"p50", "p99"}, "executors": {"processes", "database"}}, ...}.
 
 For n = 2, 4, 8, 16, 32 robots (quick: 2, 4, 8) of mixed models (Huskies, TurtleBots, TIAGos with move_base;
 not the Spots, whose go_to_pose the simulator does not serve), each gets a goal on the far side of the warehouse (robots from the west go east and the other way
 round, so the routes cross), submitted together as one instruction per robot through
-execution.instructions.submit, run by the execution engine on K Celery worker processes (threads pool, enough
-threads for every robot) against the simulator, itself in a process of its own (simworker.testing.WorldProcess):
+execution.instructions.submit, run by K executor processes (`manage.py executor`: an asyncio task per robot,
+the robots spread over the processes by rendezvous hashing) against the simulator, itself in a process of its own (simworker.testing.WorldProcess):
 what is measured is the traffic layer, not one interpreter's lock shared by the physics and 32 executors.
 With DATABASE_URL naming a PostgreSQL server, the bench runs on a scratch database there (bench_coordination,
 created afresh and dropped at the end); else on a SQLite file, which locks under many robots.
 The scheduler process (`manage.py scheduler`) is not started: every instruction names its robot, which is free,
 so nothing waits for allocation, and the executors themselves fail an instruction whose lock lapsed; its
-watchdog would only add the stop of a robot whose worker died.
+watchdog would only add the stop of a robot whose executor died.
 
 - contacts: robot-robot contacts counted by the simulator's physics (simworker.physics, a pymunk handler);
 - deadlocks: wait-for cycles the traffic layer found (and broke by rerouting one robot), execution.traffic_state;
@@ -36,7 +36,6 @@ from __future__ import annotations
 import math
 import os
 import random
-import socket
 import statistics
 import sys
 import tempfile
@@ -48,7 +47,6 @@ from urllib.parse import urlparse
 
 import django
 import psycopg
-from django.conf import settings
 from django.core.cache import cache
 from django.core.management import call_command
 from django.db import connection, connections
@@ -65,9 +63,8 @@ from fleetcore.world import load_world
 from simworker.testing import WorldProcess
 
 RESULT_FILE = "coordination.json"
-WORKERS = 4  # Celery worker processes running the robots' executors (--workers)
-WORKER_START_TIMEOUT = 60.0  # s: every worker answers a ping
-PING_TIMEOUT = 1.0  # s: one round of pings
+EXECUTORS = 2  # executor processes (--executors): one per core of this machine
+EXECUTOR_START_TIMEOUT = 60.0  # s: every executor is a live member
 HOME_SETTLE_S = 0.5  # s: robots sent home publish their new odometry before their traffic is released
 SCRATCH_DB = "bench_coordination"  # on DATABASE_URL's PostgreSQL server
 POSTGRES_SCHEMES = {"postgres", "postgresql"}
@@ -109,14 +106,12 @@ def database() -> Iterator[str]:
 
 
 def setup_django(database_url: str) -> None:
-    """Django on the bench's database, executing on the Celery queue of this run, with keys of its own.
+    """Django on the bench's database, with keys of its own (its executors' membership and wake-ups too).
 
-    All of it is said in the environment, which the workers are started with (fleet.processes.fleet_env)."""
+    All of it is said in the environment, which the executors are started with (fleet.processes.fleet_env)."""
     tag = f"bench-coord-{os.getpid()}-{uuid.uuid4().hex[:6]}"
     os.environ.update(
         DATABASE_URL=database_url,
-        FLEET_EXECUTE="celery",
-        FLEET_EXECUTE_QUEUE=tag,
         FLEET_EXEC_KEY_PREFIX=f"bench:coord:{os.getpid()}",
         FLEET_REDIS_PREFIX=tag,  # a portal on the same Redis sees none of the bench's poses and pushes
         FLEET_WORLD=WORLD,
@@ -126,42 +121,29 @@ def setup_django(database_url: str) -> None:
     call_command("migrate", verbosity=0)
 
 
-def worker_command(queue: str, name: str, threads: int) -> list[str]:
-    """A Celery worker on the bench's queue, with a threads pool (an executor blocks a thread while its robot
-    drives); without its banner, and without gossip and mingle, which the bench does not need and which slow
-    its start."""
-    return [
-        *(sys.executable, "-m", "celery", "-A", "fleet", "-q", "worker", "-Q", queue, "-n", name),
-        *("-P", "threads", "-c", str(threads), "-l", "warning", "--without-gossip", "--without-mingle"),
-    ]
+def wait_ready(procs: list, count: int) -> None:
+    """Wait (bounded) until every executor is a live member, so that the first run does not time their start."""
+    # Deferred: the executor module reads settings, which this bench points at its own database first.
+    from execution import executor
 
-
-def wait_ready(procs: list, names: list[str]) -> None:
-    """Wait (bounded) until every worker answers a ping, so that the first run does not time their start."""
-    # Deferred: the Celery app reads settings, which this bench points at its own database first.
-    from fleet.celery import app
-
-    waiting, deadline = set(names), time.monotonic() + WORKER_START_TIMEOUT
-    while waiting:
+    deadline = time.monotonic() + EXECUTOR_START_TIMEOUT
+    while len(executor.live_members()) < count:
         if any(proc.poll() is not None for proc in procs):
-            raise RuntimeError("a Celery worker exited while starting (its log is above)")
+            raise RuntimeError("an executor exited while starting (its log is above)")
         if time.monotonic() > deadline:
-            raise RuntimeError(f"Celery workers not up within {WORKER_START_TIMEOUT:g} s: {sorted(waiting)}")
-        for reply in app.control.ping(destination=sorted(waiting), timeout=PING_TIMEOUT):
-            waiting -= reply.keys()
+            raise RuntimeError(f"{count} executors not up within {EXECUTOR_START_TIMEOUT:g} s")
+        time.sleep(0.2)
 
 
 @contextmanager
-def executor_workers(count: int, threads: int) -> Iterator[None]:
-    """count Celery worker processes of threads threads each, sharing the bench's database, Redis and keys;
-    each ended at the end (SIGTERM to its process group, SIGKILL after fleet.processes.STOP_GRACE_S)."""
-    queue, env = settings.FLEET_EXECUTE_QUEUE, fleet_env()
-    names = [f"{queue}-{i}@{socket.gethostname()}" for i in range(count)]
-    procs = []
+def executors(count: int) -> Iterator[None]:
+    """count executor processes (`manage.py executor`) sharing the bench's database, Redis and keys; each ended
+    at the end (SIGTERM to its process group, SIGKILL after fleet.processes.STOP_GRACE_S)."""
+    env, procs = fleet_env(), []
     try:
-        for name in names:
-            procs.append(start(worker_command(queue, name, threads), env))
-        wait_ready(procs, names)
+        for _ in range(count):
+            procs.append(start([sys.executable, "manage.py", "executor"], env))
+        wait_ready(procs, count)
         yield
     finally:
         for proc in procs:
@@ -370,27 +352,24 @@ def allocation_ms(rounds: int) -> dict:
 
 
 def arguments(argv: list[str] | None):
-    """The components' command line, and which robot counts to run and on how many worker processes."""
+    """The components' command line, and which robot counts to run and on how many executor processes."""
     parser = component.parser(__doc__.splitlines()[0])
     parser.add_argument("--counts", type=int, nargs="+", help="robot counts to run (default: the mode's)")
-    parser.add_argument(
-        "--workers", type=int, default=WORKERS, help="Celery worker processes for the executors"
-    )
+    parser.add_argument("--executors", type=int, default=EXECUTORS, help="executor processes")
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> dict:
     args = arguments(argv)
     cfg = {**MODES[args.mode], "counts": args.counts or MODES[args.mode]["counts"]}
-    threads = math.ceil(max(cfg["counts"]) / args.workers)  # a thread for every robot driving at once
     with database() as url:
         setup_django(url)
         started = time.time()
         data = {"mode": args.mode}
-        with executor_workers(args.workers, threads):
+        with executors(args.executors):
             data["coordination"] = crossing(cfg)
         data["allocation_ms_1000"] = allocation_ms(cfg["alloc_rounds"])
-        data["executors"] = {"workers": args.workers, "threads": threads, "database": connection.vendor}
+        data["executors"] = {"processes": args.executors, "database": connection.vendor}
         data["seconds"] = round(time.time() - started)
         connections.close_all()
     component.write(args.out, RESULT_FILE, data)

@@ -3,15 +3,15 @@
     python -m bench.cost [--quick|--full] [--out DIR] [--robots N] [--clients C] [--driven K] [--window S]
 
 One simulator process (N TurtleBot3s on the paper world's `extra` endpoint, registered through the portal's own
-identification) and a private portal as `make run` has it (web, instructions worker, control worker, links,
-scheduler). Every robot turns all along (a Twist every 0.5 s from this process, which is not measured). CPU
+identification) and a private portal as `make run` has it (web, executor, instructions worker, control worker,
+links, scheduler). Every robot turns all along (a Twist every 0.5 s from this process, which is not measured). CPU
 (user + system, children included) of each process is read with psutil over three windows:
 
 - base: no browser, no instruction: the simulator, the links process, the scheduler, each per robot;
 - clients: C dashboards on /ws/fleet/ (frames counted, not decoded): the web process's extra CPU per client per
   robot;
-- driven: K robots under a turn_by instruction (the others still teleoped): the instructions worker's and the
-  scheduler's extra CPU per driven robot.
+- driven: K robots under a turn_by instruction (the others still teleoped): the executor's and the scheduler's
+  extra CPU per driven robot.
 
 The model: cores = N x (sim + links + C x web_per_client + driven share x (executor + scheduler_driven)) + fixed;
 so a host of H cores carries N = H / (that sum per robot). Writes cost.json (bench/results by default).
@@ -240,14 +240,14 @@ def model(m: dict, cfg: dict, robots: int) -> dict:
         "scheduler_per_robot": base["scheduler"] / robots,
         "web_idle_per_robot": base["web"] / robots,
         "web_per_client_per_robot": max(0.0, clients["web"] - base["web"]) / cfg["clients"] / robots,
-        "executor_per_driven_robot": max(0.0, driven["worker"] - base["worker"]) / cfg["driven"],
+        "executor_per_driven_robot": max(0.0, driven["executor"] - base["executor"]) / cfg["driven"],
         "scheduler_per_driven_robot": max(0.0, driven["scheduler"] - base["scheduler"]) / cfg["driven"],
         "redis_per_robot": base.get("redis", 0.0) / robots,
         "redis_per_driven_robot": max(0.0, driven.get("redis", 0.0) - base.get("redis", 0.0)) / cfg["driven"],
         "sim_per_driven_robot": max(0.0, driven["sim"] - base["sim"]) / cfg["driven"],
     }
     ms = {k: round(v * 1000, 3) for k, v in per.items()}
-    fixed = base["worker"] + base["control"]
+    fixed = base["executor"] + base["worker"] + base["control"]
     share = cfg["driven"] / robots
 
     def per_robot(c: int) -> float:

@@ -107,22 +107,24 @@ class Portal:
         raise RuntimeError(f"portal web server did not answer within {timeout:g} s (log: {self.tmp}/web.log)")
 
     def start_worker(self) -> None:
-        """Celery as `make run` has it: a threaded instructions worker (instructions block a thread while robots
-        move) and a separate control worker, so stops and registrations never wait behind an instruction."""
+        """The workers as `make run` has them: the executor (the robots' instructions, `manage.py executor`), the
+        Celery instructions worker (recordings, experiment runs) and a separate control worker, so stops and
+        registrations never wait behind anything."""
         if "worker" in self.procs:
             return
         common = ["-l", "warning", "--without-gossip", "--without-mingle", "--without-heartbeat"]
         celery = [sys.executable, "-m", "celery", "-A", "fleet", "worker"]
+        self._spawn("executor", [sys.executable, "manage.py", "executor"])
         self._spawn(
             "worker",
-            [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "32", *common],
+            [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "8", *common],
         )
         self._spawn(
             "control", [*celery, "-n", "control@%h", "-Q", "control,registration", "-c", "1", *common]
         )
         time.sleep(2.0)
-        self._check_alive("worker")
-        self._check_alive("control")
+        for name in ("executor", "worker", "control"):
+            self._check_alive(name)
 
     def start_links(self) -> None:
         """The robot links as `make run` has them: one rosbridge link per registered endpoint, live poses."""

@@ -353,8 +353,8 @@ class Bench:
         try:
             return await asyncio.wait_for(execution.run(self, name), limit)
         except TimeoutError:
-            tail = self.portal.log_tail("worker", 400)
-            raise RuntimeError(f"did not finish within {limit} s; worker log ends: {tail}") from None
+            tail = self.portal.log_tail("executor", 400)
+            raise RuntimeError(f"did not finish within {limit} s; executor log ends: {tail}") from None
 
 
 def profile_teleop(name: str, user, calls: int = 200) -> tuple[float, str]:

@@ -9,7 +9,8 @@ Hosts (each a network namespace with its own hostname, one veth on the bridge `f
     db     10.77.0.10  PostgreSQL (a cluster of its own, made with initdb under the state folder) and Redis
     web1   10.77.0.11  uvicorn, the ASGI app, port 8000
     web2   10.77.0.12  the same
-    exec1  10.77.0.21  Celery: the `instructions` worker (the robots' executors) and the `control,registration` one
+    exec1  10.77.0.21  the robots' executors (`manage.py executor`), the Celery `instructions` worker (recordings,
+                       experiment runs) and the `control,registration` one
     exec2  10.77.0.22  the same
     sim1   10.77.0.31  a simulator shard: the paper world's `extra` endpoint, its first slice of robots, port 9094
     sim2   10.77.0.32  the next slice of robots, same port on its own address
@@ -106,7 +107,7 @@ class Cluster:
     root: Path = DEFAULT_DIR
     robots_per_shard: int = 10
     python: str = sys.executable
-    workers: int = 16  # threads of each `instructions` worker
+    executors: int = 1  # executor processes on each exec host
     spacing: float | None = None  # metres between the simulated robots (the paper world's 0.45 fits 532)
     pids: dict[str, int] = field(default_factory=dict)
 
@@ -176,8 +177,10 @@ class Cluster:
                 Role(host, "web", [py, "-m", "uvicorn", "fleet.asgi:application", *web, "--no-proxy-headers"])
             )
         for host in ("exec1", "exec2"):
-            instructions = ["-n", f"instructions@{host}", "-Q", "instructions", "-P", "threads"]
-            listed.append(Role(host, "worker", [*celery, *instructions, "-c", str(self.workers)]))
+            for n in range(1, self.executors + 1):
+                listed.append(Role(host, f"executor-{n}", [*manage, "executor"]))
+            tasks = ["-n", f"instructions@{host}", "-Q", "instructions", "-P", "threads", "-c", "4"]
+            listed.append(Role(host, "worker", [*celery, *tasks]))  # recordings, experiment runs
             listed.append(
                 Role(
                     host,

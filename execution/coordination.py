@@ -1,10 +1,10 @@
 """What the processes of the fleet agree on through Redis: robot locks, stop and preempt flags, last poses.
 
-- A robot lock (SET NX PX) means at most one active instruction per robot across all workers; its value is the
-  holder's token, also stored on the Execution it runs, so a watchdog can tell a running Execution whose worker
-  died (no lock, or someone else's) from a live one. The holder's Heartbeat renews it every HEARTBEAT_S while
-  the command loop beats: a killed or frozen executor lets it lapse within LOCK_TTL_MS, and the scheduler's
-  watchdog (execution/watchdog.py, every WATCHDOG_S) then stops the robot.
+- A robot lock (SET NX PX) means at most one active instruction per robot across all executors; its value is
+  the holder's token, also stored on the Execution it runs, so a watchdog can tell a running Execution whose
+  executor died (no lock, or someone else's) from a live one. The holder's board (execution/board.py) renews
+  it every HEARTBEAT_S while the command loop beats: a killed or frozen executor lets it lapse within
+  LOCK_TTL_MS, and the scheduler's watchdog (execution/watchdog.py, every WATCHDOG_S) then stops the robot.
 - A stop flag holds the time of the last stop of a robot; a runner stops when it is newer than its start.
 - A preempt flag names the Execution that interrupts the robot's current one.
 - A cancel flag holds who cancelled one Execution (one instruction cancelled); its runner stops it.
@@ -30,8 +30,6 @@ from django.conf import settings
 from redis.asyncio.retry import Retry as AsyncRetry
 from redis.backoff import NoBackoff
 from redis.retry import Retry
-
-from fleetcore import faults
 
 LOCK_TTL_MS = 1000  # a dead executor's robot is found within this plus one watchdog period (under 2 s)
 HEARTBEAT_S = 0.25  # between renewals: three may be late before the lock lapses
@@ -90,6 +88,7 @@ class RobotLock:
     """The one-runner-per-robot lock with expiry; renew() while running, release() at the end."""
 
     def __init__(self, robot_id: int, token: str | None = None, ttl_ms: int = LOCK_TTL_MS) -> None:
+        self.robot_id = robot_id
         self.key = key("lock", robot_id)
         self.token = token or new_token()
         self.ttl_ms = ttl_ms
@@ -103,79 +102,6 @@ class RobotLock:
 
     def release(self) -> None:
         connection().eval(RELEASE, 1, self.key, self.token)
-
-
-class Heartbeat:
-    """Keep a held RobotLock alive from a thread of its own, as long as the command loop beats.
-
-    The holder of a robot's command stream proves it is alive by renewing the lock every HEARTBEAT_S. A killed
-    or frozen process renews nothing (its threads die or freeze with it), so the lock lapses within its time to
-    live; a command loop that hangs inside a live process stops beating, and LIVELY_S later the heartbeat stops
-    renewing, with the same result. Either way the watchdog then stops the robot. The command loop asks `held`
-    before each command: a lock that could not be confirmed within its time to live is not ours any more.
-    """
-
-    def __init__(self, lock: RobotLock, every: float = HEARTBEAT_S, lively: float = LIVELY_S) -> None:
-        self.lock, self.every, self.lively = lock, every, lively
-        self.renewed = self.alive_until = 0.0
-        self.lost = self.quiet = False
-        self.fault: str | None = None  # why Redis refused a renewal's write (a full disk), in words
-        self._stopping = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"heartbeat {lock.key}", daemon=True)
-
-    @property
-    def token(self) -> str:
-        return self.lock.token
-
-    def start(self) -> Heartbeat:
-        """Start renewing (call right after the lock was acquired)."""
-        self.renewed = time.monotonic()
-        self.beat()
-        self._thread.start()
-        return self
-
-    def beat(self) -> None:
-        """The command loop is alive: keep renewing for another LIVELY_S."""
-        self.alive_until = time.monotonic() + self.lively
-
-    @property
-    def why_lost(self) -> str:
-        """Why the lock is not ours, in a person's words (for the execution's outcome)."""
-        if self.fault:
-            return f"{self.fault}, so its lock on the robot could not be kept"
-        if self.lost:
-            return "its lock on the robot lapsed before it was renewed (it is not ours any more)"
-        if self.quiet:
-            return f"its command loop did not run for {self.lively:g} s, so its lock on the robot lapsed"
-        return f"its lock on the robot was not renewed for {self.lock.ttl_ms / 1000:g} s (a starved process?)"
-
-    @property
-    def held(self) -> bool:
-        """Whether the lock is still ours: never refused, and confirmed within its time to live."""
-        return not self.lost and time.monotonic() - self.renewed < self.lock.ttl_ms / 1000
-
-    def stop(self) -> None:
-        self._stopping.set()
-        if self._thread.is_alive() and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2 * self.every + 1)
-
-    def _run(self) -> None:
-        while not self._stopping.wait(self.every):
-            self.quiet = time.monotonic() > self.alive_until
-            if self.quiet:
-                continue  # the command loop is hung: let the lock lapse so the watchdog takes over
-            sent = time.monotonic()
-            try:
-                renewed = self.lock.renew()
-            except Exception as exc:  # Redis away: try again; `held` turns false once the lock has lapsed
-                log.warning("%s: heartbeat not renewed: %s", self.lock.key, exc)
-                self.fault = faults.refusal(exc) or self.fault
-                continue
-            if not renewed:
-                log.warning("%s: lost, %.1f s after its last renewal", self.lock.key, sent - self.renewed)
-                self.lost = True  # expired and taken, or released: never ours again
-                return
-            self.renewed = sent
 
 
 def lock_holders(robot_ids) -> dict[int, str | None]:

@@ -18,18 +18,16 @@ Rules (the paper's Figure 6 and section 3.8):
 from __future__ import annotations
 
 import math
-import threading
 from collections import defaultdict
 from dataclasses import dataclass, field, replace
 
-from django.conf import settings
-from django.db import connections, transaction
+from django.db import transaction
 from django.utils import timezone
 
 import live
 from access import holds, leases
 from access.leases import ControlRefused, check_command
-from execution import coordination, route, spots, tasks
+from execution import coordination, executor, route, spots
 from execution.models import Execution, Instruction, TimeSlot
 from fleetcore import states as statemachine
 from fleetcore import steps as step_contract
@@ -495,24 +493,8 @@ def _retry_one(instruction: Instruction, now) -> bool:
 
 
 def _after_commit(robot_ids: list[int], preempts: list[tuple[int, int]]) -> None:
-    """Wake each robot's executor: one task per robot, which runs the robot's queue under its lock."""
+    """Raise the preempt flags, then wake the robots' executors (each robot's owner runs its queue under its
+    lock, execution/executor.py)."""
     for robot_id, execution_id in preempts:
         coordination.request_preempt(robot_id, execution_id)
-    for robot_id in robot_ids:
-        launch("drain_robot", robot_id)
-
-
-def launch(task: str, pk: int) -> None:
-    """Start a fleet task: on the Celery workers (FLEET_EXECUTE=celery, the default) or in a thread here."""
-    if getattr(settings, "FLEET_EXECUTE", "celery") == "thread":
-        threading.Thread(target=_in_thread, args=(getattr(tasks, task), pk), daemon=True).start()
-        return
-    queue = getattr(settings, "FLEET_EXECUTE_QUEUE", "") or None
-    getattr(tasks, task).apply_async((pk,), queue=queue)
-
-
-def _in_thread(task, pk: int) -> None:
-    try:
-        task.run(pk)
-    finally:
-        connections.close_all()
+    executor.wake(robot_ids)

@@ -8,13 +8,14 @@ never replanned on the way: the claims keep the plans' order however late it run
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import logging
 import math
 import time
 
 import live
-from execution import coordination, route, traffic
+from execution import blocking, coordination, route, traffic
 from execution import traffic_fleet as fleet
 from execution import traffic_state as state
 from execution.steps import STALL_S, Aborted, Session, StepFailed, drive, navigate, travel_time
@@ -40,40 +41,42 @@ def stretches(path: list[tuple]) -> list[tuple]:
     return out
 
 
-def travel(session: Session, goal, pace: Pace, nav: bool = False) -> tuple[float, float]:
+async def travel(session: Session, goal, pace: Pace, nav: bool = False) -> tuple[float, float]:
     """Drive (or, with its own nav stack, navigate) the robot to goal along a reserved route, stretch by
     stretch, each claimed first; replan around a deadlock or a robot standing in the way.
 
     Returns the spot it was to stop at: the goal, or the free spot next to it when a robot stood on the goal
     (where it really stopped is judged from its pose: fleetcore.outcomes)."""
     robot = session.robot
-    _measure_clock(session)
+    await _measure_clock(session)
     around: set[int] = set()
     reroutes, gave_way, settles, stuck_since = 0, 0, 0, None
-    here = session.pose()[:2]
+    here = (await session.pose())[:2]
     # under traffic from now on: others wait for it, not go round it
-    traffic.claim(robot, here, here, session.check)
+    await blocking.call(traffic.claim, robot, here, here, session.check)
     try:
         spot = tuple(goal)  # where it stops: the goal, or a free spot next to it (the first plan says)
         for replans in range(tune.MAX_REPLANS):
-            pose = session.pose()
-            learned = state.known_pace(robot.pk) if nav else None
+            pose = await session.pose()
+            learned = await blocking.call(state.known_pace, robot.pk) if nav else None
             speed = pace.planned(nav, learned) * session.link.clock.rate  # m per second of wall time
             settled = replans > 0 and spot != tuple(goal)
-            path = traffic.plan(robot, pose[:2], spot, speed, around, session.check, settled, may_ask=True)
+            path = await blocking.call(
+                traffic.plan, robot, pose[:2], spot, speed, around, session.check, settled, may_ask=True
+            )
             if path is None:  # it stands (for good, as the others plan) until a way opens
-                state.drop_plan(robot)
+                await blocking.call(state.drop_plan, robot)
                 stuck_since = stuck_since or time.monotonic()
                 if time.monotonic() - stuck_since > tune.WAIT_LIMIT_S:
-                    in_the_way = fleet.held_in_the_way(robot, pose, spot)
+                    in_the_way = await blocking.call(fleet.held_in_the_way, robot, pose, spot)
                     raise StepFailed(f"{robot.name}: no plan to its goal clear of the others{in_the_way}")
-                _hold(session, time.time() + tune.PLAN_AGAIN_S)
+                await _hold(session, time.time() + tune.PLAN_AGAIN_S)
                 continue
             stuck_since, spot = None, tuple(path[-1][:2])
             try:
-                _follow(session, path, pace, nav, frozenset(around))
+                await _follow(session, path, pace, nav, frozenset(around))
                 done = math.dist(spot, goal) < tune.SETTLE_M or settles >= tune.SETTLE_TRIES
-                if done or not _passed(session, spot):
+                if done or not await _passed(session, spot):
                     return spot
                 settles, spot = settles + 1, tuple(goal)  # its goal may be free by now: again
             except traffic.Reroute as exc:
@@ -87,16 +90,16 @@ def travel(session: Session, goal, pace: Pace, nav: bool = False) -> tuple[float
                         f"{robot.name}: no way through: it gave way {tune.MAX_GIVE_WAYS} times in deadlocks"
                     ) from None
                 around |= exc.around
-                _back_off(session, exc.around, pace, nav)
-                here = session.pose()[:2]
+                await _back_off(session, exc.around, pace, nav)
+                here = (await session.pose())[:2]
                 # keep only where it stands: the others may go on
-                traffic.claim(robot, here, here, session.check)
+                await blocking.call(traffic.claim, robot, here, here, session.check)
         raise StepFailed(f"{robot.name}: not there after {tune.MAX_REPLANS} plans")
     finally:
-        state.release(robot, session.link.poses.value)
+        await blocking.call(state.release, robot, session.link.poses.value)
 
 
-def _passed(session: Session, spot) -> bool:
+async def _passed(session: Session, spot) -> bool:
     """Whether the robots under way that have yet to pass near the free spot where this one stopped
     (traffic.yet_to_pass: it does not plan again from there before them) pass within PASS_WAIT_S; then it
     plans again for its goal, which they may have left. It waits at rest, holding the room it stands in; one of
@@ -104,8 +107,8 @@ def _passed(session: Session, spot) -> bool:
     once, which takes it off that one's way (a swap whose third robot crossed the spot, run under load)."""
     robot, redis = session.robot, coordination.connection()
     deadline = time.monotonic() + tune.PASS_WAIT_S
-    while traffic.yet_to_pass(robot, spot):
-        if state.waiting_for(redis, robot.pk):
+    while await blocking.call(traffic.yet_to_pass, robot, spot):
+        if await blocking.call(state.waiting_for, redis, robot.pk):
             log.info(
                 "traffic: %s at its free spot %s is in another's way: it plans for its goal", robot.name, spot
             )
@@ -115,32 +118,33 @@ def _passed(session: Session, spot) -> bool:
                      tune.PASS_WAIT_S)  # fmt: skip
             return False
         session.check()
-        state.renew(redis, robot.pk)
-        time.sleep(tune.WAIT_POLL_S)
-        session.pose()  # a robot waiting still reads where it is (and odometry that stops fails the step)
+        await blocking.call(state.renew, redis, robot.pk)
+        await asyncio.sleep(tune.WAIT_POLL_S)
+        await (
+            session.pose()
+        )  # a robot waiting still reads where it is (and odometry that stops fails the step)
     return True
 
 
-def _back_off(session: Session, others: set[int], pace: Pace, nav: bool) -> None:
+async def _back_off(session: Session, others: set[int], pace: Pace, nav: bool) -> None:
     """Give way to the robots of a deadlock: drive BACK_OFF_M straight away from them (or half or a quarter
     turn aside), where the map is free and the claim is granted, so the plan round them starts with room to
     pass; two robots stopped nose to nose are too close for any first stretch of a way round to be granted
     (the claims let nobody come nearer). Nowhere to go: it replans where it stands."""
     robot, redis = session.robot, coordination.connection()
-    here = session.pose()[:2]
-    held = [
-        plain.entry_capsule(pk, entry) for pk, entry in state.read(redis, "claims").items() if pk in others
-    ]
-    for target in give_way(here, held, route.planner_for(robot)):
-        if traffic.claim(robot, here, target, session.check) is not None:
+    here = (await session.pose())[:2]
+    claims = await blocking.call(state.read, redis, "claims")
+    held = [plain.entry_capsule(pk, entry) for pk, entry in claims.items() if pk in others]
+    for target in give_way(here, held, await blocking.call(route.planner_for, robot)):
+        if await blocking.call(traffic.claim, robot, here, target, session.check) is not None:
             continue
         log.info("traffic: %s backs off to %s to give way to %s", robot.name, target, sorted(others))
         try:
             if nav:
-                navigate(session, *target, travel_time(tune.BACK_OFF_M * 2, math.pi, pace.stack_limits))
+                await navigate(session, *target, travel_time(tune.BACK_OFF_M * 2, math.pi, pace.stack_limits))
             else:
                 controller = motion.GoToGoal(target, pace.limits, tune.CORNER_TOLERANCE)
-                drive(
+                await drive(
                     session,
                     controller,
                     travel_time(tune.BACK_OFF_M, math.pi, pace.limits),
@@ -172,16 +176,16 @@ def give_way(here, held: list[plain.Capsule], planner) -> list[tuple[float, floa
     return out
 
 
-def _measure_clock(session: Session) -> None:
+async def _measure_clock(session: Session) -> None:
     """Read odometry until the robot's clock rate is known (a link opened just now has not measured it), so
     its plan is timed at its real pace; a robot whose stamps say nothing is planned at rate 1."""
     deadline = time.monotonic() + 3 * motion.RATE_SPAN_S
     while not session.link.clock.measured and time.monotonic() < deadline:
-        session.pose()
+        await session.pose()
         session.check()
 
 
-def _follow(session: Session, path, pace: Pace, nav: bool, gone_round: frozenset = frozenset()) -> None:
+async def _follow(session: Session, path, pace: Pace, nav: bool, gone_round: frozenset = frozenset()) -> None:
     """Drive the planned path stretch by stretch, each claimed first; the goal is the path's end (the goal
     asked for, or the free spot next to it when that was taken). The plan is never replanned on the way: the
     claims keep its order however late the robot runs (a replan would make a new order against robots already
@@ -199,16 +203,16 @@ def _follow(session: Session, path, pace: Pace, nav: bool, gone_round: frozenset
     due = planned  # when the next stretch is planned to begin
     for i, (x, y, t, hold) in enumerate(legs):
         begins = due
-        live.path(robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
+        await blocking.call(live.path, robot, [(round(p[0], 2), round(p[1], 2)) for p in legs[i:]], None)
         early = time.time() < due - tune.EARLY_S
         if hold or early:  # a planned wait, or early: keep to the plan's times
-            _hold(session, t if hold else due - tune.EARLY_S)
+            await _hold(session, t if hold else due - tune.EARLY_S)
         due = t
         if hold:
             continue
-        pose = session.pose()
+        pose = await session.pose()
         ahead = [tuple(p[:2]) for p in legs[i:]]
-        traffic.wait_for(session, pose[:2], (x, y), (begins, t), ahead, gone_round)
+        await traffic.wait_for(session, pose[:2], (x, y), (begins, t), ahead, gone_round)
         last = i == len(legs) - 1
         target = tuple(goal) if last else (x, y)
         distance = math.dist(pose[:2], target)
@@ -216,7 +220,7 @@ def _follow(session: Session, path, pace: Pace, nav: bool, gone_round: frozenset
             limit = travel_time(distance * 1.5, math.pi, pace.stack_limits)
             sent = time.monotonic()
             try:
-                navigate(session, *target, limit, stall_s=tune.NAV_STALL_S)
+                await navigate(session, *target, limit, stall_s=tune.NAV_STALL_S)
             except Aborted:
                 if last:
                     raise
@@ -226,11 +230,11 @@ def _follow(session: Session, path, pace: Pace, nav: bool, gone_round: frozenset
                     target,
                 )
                 continue
-            _note_pace(session, distance, time.monotonic() - sent)
+            await _note_pace(session, distance, time.monotonic() - sent)
         else:
             tolerance = motion.TOLERANCE if last else _tolerance(pose[:2], legs, i)
             controller = motion.GoToGoal(target, pace.limits, tolerance)
-            drive(
+            await drive(
                 session,
                 controller,
                 travel_time(distance, math.pi, pace.limits),
@@ -252,18 +256,18 @@ def _tolerance(here, legs, i: int) -> float:
     return tune.CORNER_TOLERANCE if turn > tune.CORNER_TURN else tune.WAYPOINT_TOLERANCE
 
 
-def _note_pace(session: Session, distance: float, elapsed: float) -> None:
+async def _note_pace(session: Session, distance: float, elapsed: float) -> None:
     """Learn the nav stack's pace from a stretch it drove (turns and ramps included): later plans are timed
     by it. The stack chooses its own speed, which the portal can only observe."""
     if distance < tune.PACE_MIN_M or elapsed <= 0:
         return
-    state.note_pace(session.robot.pk, distance / elapsed / session.link.clock.rate)
+    await blocking.call(state.note_pace, session.robot.pk, distance / elapsed / session.link.clock.rate)
 
 
-def _hold(session: Session, until: float) -> None:
+async def _hold(session: Session, until: float) -> None:
     """A wait in the plan: stay until its time (another robot passes first), at most HOLD_S beyond now."""
     deadline = min(until, time.time() + tune.HOLD_S)
-    session.link.halt()
+    await session.link.halt()
     while time.time() < deadline:
         session.check()
-        session.pose()
+        await session.pose()

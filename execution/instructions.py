@@ -5,8 +5,8 @@ says whether it is a stop and which robots it names. Stop instructions ("stop", 
 do not queue: read with the grammar the process has (no Redis on the way), a zero velocity is published from an
 event loop and the robots' stop flags raised before any database write (execution.fast_stop, as the STOP button does), then execution.control.stop checks, stops again,
 cancels what was queued and audits; a database or Redis that fails meanwhile is said in the outcome, never raised. Everything else is
-checked against the step contract (fleetcore.steps) and becomes one Execution per robot, run by the Celery
-workers (execution.tasks.drain_robot, one per robot). A database that fails midway leaves no row behind.
+checked against the step contract (fleetcore.steps) and becomes one Execution per robot, run by the executor
+process that owns the robot (execution/executor.py: woken after the commit). A database that fails midway leaves no row behind.
 """
 
 from __future__ import annotations

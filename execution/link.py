@@ -1,6 +1,9 @@
 """A robot's command link: its bound topics, spoken in its message types, over the shared rosbridge client.
 
-Publishing goes through robots.rosbridge.sync (one link per endpoint per process). Poses come from the
+RobotLink lives on the executor's event loop, next to the robot's task: it publishes on that loop's own
+rosbridge client (robots.rosbridge.pool, one per endpoint per loop) and its subscriptions' callbacks run there.
+publish_zero, for the synchronous callers that stop a robot (control, the watchdog), goes through
+robots.rosbridge.sync. Poses come from the
 odometry binding composed with the robot's start pose, corrected by amcl_pose when the robot has one; the
 odometry passes the robot's gate first (fleetcore.posegate), and a refused message wakes whoever waits for a
 pose, so the step fails at once with the reason (`fault`).
@@ -12,7 +15,6 @@ import asyncio
 import contextlib
 import json
 import math
-import threading
 import time
 from dataclasses import dataclass
 
@@ -23,7 +25,7 @@ from robots import commands
 from robots import poses as pose_store
 from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, CommandSurface
 from robots.models import Robot
-from robots.rosbridge import sync
+from robots.rosbridge import pool, sync
 
 PHOTO_TICK_S = 0.25  # waiting for a camera frame, the session is checked this often (stops, its heartbeat)
 
@@ -58,24 +60,28 @@ def publish_zero(robot: Robot) -> None:
 
 
 class Latest:
-    """The latest value a subscription delivered, with a counter to wait for the next one."""
+    """The latest value a subscription delivered, with a counter to wait for the next one (on the link's loop)."""
 
     def __init__(self) -> None:
-        self.cond = threading.Condition()
         self.value = None
         self.count = 0
+        self._changed = asyncio.Event()
 
     def put(self, value) -> None:
-        with self.cond:
-            self.value, self.count = value, self.count + 1
-            self.cond.notify_all()
+        self.value, self.count = value, self.count + 1
+        self._changed.set()
+        self._changed = asyncio.Event()
 
-    def next(self, seen: int, timeout: float):
+    async def next(self, seen: int, timeout: float):
         """(value, count) once count > seen, or (None, seen) on timeout."""
-        with self.cond:
-            if not self.cond.wait_for(lambda: self.count > seen, timeout):
+        deadline = time.monotonic() + timeout
+        while self.count <= seen:
+            left = deadline - time.monotonic()
+            if left <= 0:
                 return None, seen
-            return self.value, self.count
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._changed.wait(), left)
+        return self.value, self.count
 
 
 @dataclass
@@ -86,11 +92,12 @@ class Goal:
     id: str
     target: tuple[float, float]
     handle: object = None  # the ROS 2 ActionGoal
-    result: object = None  # a concurrent future of its result
+    result: asyncio.Future | None = None  # its result, awaited on the link's loop
 
 
 class RobotLink:
-    """Command one robot and watch its pose: open() before use, close() after."""
+    """Command one robot and watch its pose, on the executor's event loop: build it off the loop (its bindings
+    are read from the database), then `await open()` before use and `await close()` after."""
 
     def __init__(self, robot: Robot) -> None:
         self.robot = robot
@@ -112,32 +119,35 @@ class RobotLink:
         self.nav_status = Latest()
         self.client = None
         self._subs = []
+        self._planner_max = self._registered_planner_top()
 
     # ----- lifecycle -----
-    def open(self) -> RobotLink:
-        self.client = client_for(self.robot)
-        self._subscribe(
-            self.odometry.target, self.odometry.message_type or "nav_msgs/Odometry", self._on_odom
-        )
+    async def open(self) -> RobotLink:
+        try:
+            self.client = await pool.client(self.robot.endpoint)
+        except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the outcome
+            raise LinkError(f"{self.robot.name}: cannot reach {self.robot.endpoint}: {exc}") from exc
+        odometry = self.odometry
+        await self._subscribe(odometry.target, odometry.message_type or "nav_msgs/Odometry", self._on_odom)
         if self.amcl is not None:
-            self._subscribe(self.amcl.target, self.amcl.message_type or "", self._on_amcl)
+            await self._subscribe(self.amcl.target, self.amcl.message_type or "", self._on_amcl)
         if self.nav_kind == NAV_MOVE_BASE:
             ns = self.surface.nav_namespace
-            self._subscribe(f"{ns}/status", "actionlib_msgs/GoalStatusArray", self.nav_status.put)
+            await self._subscribe(f"{ns}/status", "actionlib_msgs/GoalStatusArray", self.nav_status.put)
         return self
 
-    def _subscribe(self, topic: str, type_: str, callback) -> None:
-        self._subs.append(self.client.subscribe(topic, type_, callback))
+    async def _subscribe(self, topic: str, type_: str, callback) -> None:
+        self._subs.append(await self.client.subscribe(topic, type_, callback))
 
     @property
     def connected(self) -> bool:
         """Whether the rosbridge link is up now (it reconnects by itself; subscriptions come back with it)."""
-        return self.client is not None and self.client.client.is_connected
+        return self.client is not None and self.client.is_connected
 
-    def close(self) -> None:
+    async def close(self) -> None:
         for sub in self._subs:
             with contextlib.suppress(Exception):  # the link may be down; nothing else to release
-                self.client.unsubscribe(sub)
+                await self.client.unsubscribe(sub)
         self._subs = []
 
     # ----- poses -----
@@ -168,12 +178,12 @@ class RobotLink:
         c, s = math.cos(yaw0), math.sin(yaw0)
         self.start = (ax - (c * lx - s * ly), ay - (s * lx + c * ly), yaw0)
 
-    def next_pose(self, seen: int, timeout: float = 1.0):
+    async def next_pose(self, seen: int, timeout: float = 1.0):
         """((x, y, yaw) on the map, counter) after the next odometry message; (None, seen) on timeout."""
-        return self.poses.next(seen, timeout)
+        return await self.poses.next(seen, timeout)
 
     # ----- camera -----
-    def photo(self, timeout: float, between=None) -> dict:
+    async def photo(self, timeout: float, between=None) -> dict:
         """The next frame on the robot's camera binding (the message as rosbridge gives it), from a subscription
         of its own held only till then; `between()` is called every PHOTO_TICK_S meanwhile (the session's check:
         a stop ends the wait). LinkError when no camera is bound or no frame comes within `timeout` s."""
@@ -181,45 +191,44 @@ class RobotLink:
         if camera is None:
             raise LinkError(f"{self.robot.name}: no camera topic is bound")
         frame = Latest()
-        sub = self.client.subscribe(camera.target, camera.message_type, frame.put, queue_length=1)
+        sub = await self.client.subscribe(camera.target, camera.message_type, frame.put, queue_length=1)
         try:
             until = time.monotonic() + timeout
             while (left := until - time.monotonic()) > 0:
-                message, _ = frame.next(0, min(PHOTO_TICK_S, left))
+                message, _ = await frame.next(0, min(PHOTO_TICK_S, left))
                 if message is not None:
                     return message
                 if between is not None:
                     between()
         finally:
             with contextlib.suppress(Exception):  # the link may be down; nothing else to release
-                self.client.unsubscribe(sub)
+                await self.client.unsubscribe(sub)
         raise LinkError(f"{self.robot.name}: no frame from {camera.target} within {timeout:g} s")
 
     # ----- commands -----
-    def velocity(self, v: float, w: float) -> None:
-        self.client.publish(*self.surface.velocity(v, w))
+    async def velocity(self, v: float, w: float) -> None:
+        await self.client.publish(*self.surface.velocity(v, w))
 
-    def halt(self, goal: Goal | None = None) -> None:
+    async def halt(self, goal: Goal | None = None) -> None:
         """Zero velocity, and cancel the navigation goal if one is in flight."""
         if goal is not None:
-            self.cancel(goal)
-        self.velocity(0.0, 0.0)
+            await self.cancel(goal)
+        await self.velocity(0.0, 0.0)
 
-    def navigate(self, x: float, y: float, yaw: float, goal_id: str) -> Goal:
+    async def navigate(self, x: float, y: float, yaw: float, goal_id: str) -> Goal:
         """Send a navigation goal the way this robot's stack takes it."""
         now = time.time()
         if self.nav_kind == NAV_MOVE_BASE:
-            self.client.publish(*self.surface.move_base_goal(x, y, yaw, goal_id, now))
+            await self.client.publish(*self.surface.move_base_goal(x, y, yaw, goal_id, now))
             return Goal(NAV_MOVE_BASE, goal_id, (x, y))
         if self.nav_kind == NAV_NAV2:
-            handle = self.client.send_action_goal(
+            handle = await self.client.send_action_goal(
                 self.surface.nav_namespace,
                 "nav2_msgs/action/NavigateToPose",
                 motion.navigate_to_pose_goal(x, y, yaw, now),
             )
-            result = asyncio.run_coroutine_threadsafe(handle.wait(None), self.client.runner.loop)
-            return Goal(NAV_NAV2, handle.id, (x, y), handle, result)
-        self.client.publish(*self.surface.simple_goal(x, y, yaw, now))
+            return Goal(NAV_NAV2, handle.id, (x, y), handle, asyncio.ensure_future(handle.wait(None)))
+        await self.client.publish(*self.surface.simple_goal(x, y, yaw, now))
         return Goal(NAV_SIMPLE, goal_id, (x, y))
 
     def goal_outcome(self, goal: Goal, pose) -> str | None:
@@ -230,11 +239,9 @@ class RobotLink:
         if goal.kind == NAV_NAV2:
             if not goal.result.done():
                 return None
-            try:
-                reply = goal.result.result()
-            except Exception:
+            if goal.result.cancelled() or goal.result.exception() is not None:
                 return "failed"
-            return motion.ROS2_GOAL_STATUS.get(int(reply.get("status", 0)), "failed")
+            return motion.ROS2_GOAL_STATUS.get(int(goal.result.result().get("status", 0)), "failed")
         near = pose is not None and ((pose[0] - goal.target[0]) ** 2 + (pose[1] - goal.target[1]) ** 2) ** 0.5
         return "succeeded" if near is not False and near < 0.25 else None
 
@@ -243,32 +250,32 @@ class RobotLink:
         """Whether the robot has a docking action server bound (a ROS 2 action such as the Create 3's dock)."""
         return self.surface.can_dock
 
-    def dock(self) -> Goal:
+    async def dock(self) -> Goal:
         """Start the robot's own docking action; follow it with goal_outcome, stop it with cancel."""
         surface = self.surface
-        handle = self.client.send_action_goal(surface.dock_namespace, surface.dock_type, {})
-        result = asyncio.run_coroutine_threadsafe(handle.wait(None), self.client.runner.loop)
-        return Goal(NAV_NAV2, handle.id, tuple(self.robot.start_pose or (0.0, 0.0))[:2], handle, result)
+        handle = await self.client.send_action_goal(surface.dock_namespace, surface.dock_type, {})
+        home = tuple(self.robot.start_pose or (0.0, 0.0))[:2]
+        return Goal(NAV_NAV2, handle.id, home, handle, asyncio.ensure_future(handle.wait(None)))
 
-    def cancel(self, goal: Goal) -> None:
+    async def cancel(self, goal: Goal) -> None:
         """Cancel the goal as its stack takes it; a goal topic has no cancel: a goal where the robot is."""
         if goal.kind == NAV_MOVE_BASE:
-            self.client.publish(*self.surface.cancel_move_base(goal.id))
+            await self.client.publish(*self.surface.cancel_move_base(goal.id))
         elif goal.kind == NAV_NAV2:
-            self.client.cancel_action_goal(goal.handle)
+            await self.client.cancel_action_goal(goal.handle)
         elif goal.kind == NAV_SIMPLE and self.poses.value is not None:
-            self.client.publish(*self.surface.simple_goal(*self.poses.value, time.time()))
+            await self.client.publish(*self.surface.simple_goal(*self.poses.value, time.time()))
 
     # ----- speed -----
-    @contextlib.contextmanager
-    def speed_limited(self, share: float | None):
+    @contextlib.asynccontextmanager
+    async def speed_limited(self, share: float | None):
         """Hold the navigation stack at `share` of its own top speed for the block (None: its own top speed),
         and give it its own top speed back after, however the block ends. LinkError when the stack does not
         take the limit (before anything moves)."""
         surface = self.surface
         try:
-            top = self._planner_top() if surface.speed_kind == "service" else None
-            publish_all(self.client, [surface.speed_limit(share, top)], wait=True)
+            top = await self._planner_top() if surface.speed_kind == "service" else None
+            await self._call([surface.speed_limit(share, top)])
         except Exception as exc:  # the service refused or did not answer: the word cannot be kept
             raise LinkError(f"{self.robot.name}: its navigation stack took no speed limit ({exc})") from exc
         try:
@@ -277,19 +284,32 @@ class RobotLink:
             with contextlib.suppress(
                 Exception
             ):  # a link that is down cannot take it; the next trip sets it again
-                publish_all(self.client, [surface.speed_limit(None, top)], wait=True)
+                await self._call([surface.speed_limit(None, top)])
 
-    def _planner_top(self) -> float:
-        """The local planner's max_vel_x as registered (its configured top speed), else as it reads now."""
+    async def _call(self, items) -> list:
+        return await asyncio.wait_for(commands.send(self.client, items, True), commands.CALL_TIMEOUT + 1.0)
+
+    def _registered_planner_top(self) -> float | None:
+        """The local planner's max_vel_x as registered (its configured top speed), if any (read with the
+        bindings, off the loop)."""
+        if self.surface.speed_kind != "service":
+            return None
         planner = self.surface.speed_target.removesuffix("/set_parameters")
         text = self.robot.params.filter(name=f"{planner}/max_vel_x").values_list("value", flat=True).first()
         with contextlib.suppress(TypeError, ValueError):
             value = float(json.loads(text))
             if math.isfinite(value) and value > 0:
                 return value
-        (reply,) = publish_all(self.client, [self.surface.read_speed()], wait=True)
+        return None
+
+    async def _planner_top(self) -> float:
+        """The local planner's top speed as registered, else as it reads now."""
+        if self._planner_max is not None:
+            return self._planner_max
+        (reply,) = await self._call([self.surface.read_speed()])
         top = motion.reconfigured(reply, "max_vel_x")
         if top is None:
+            planner = self.surface.speed_target.removesuffix("/set_parameters")
             raise LinkError(f"{self.robot.name}: {planner} has no max_vel_x")
         return top
 

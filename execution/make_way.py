@@ -9,7 +9,7 @@ import itertools
 import math
 import time
 
-from execution import coordination, route, traffic
+from execution import blocking, coordination, route, traffic
 from execution import traffic_fleet as fleet
 from execution import traffic_state as state
 from execution.steps import Session
@@ -40,7 +40,7 @@ def aside(robot: Robot, here, request: dict) -> tuple[float, float] | None:
     )  # fmt: skip
 
 
-def until_passed(session: Session, request: dict, home) -> float:
+async def until_passed(session: Session, request: dict, home) -> float:
     """Wait, standing aside, until the robot made way for has passed `home` (it has a plan, none of whose
     cells near `home` lies ahead of where its claim starts, in the plan's order, and its claim is clear of
     it; a robot waiting to plan again has not passed), is done with its instruction or waits for this
@@ -50,29 +50,31 @@ def until_passed(session: Session, request: dict, home) -> float:
     redis, other, started = coordination.connection(), request["for"], time.monotonic()
     near = fleet.reach(session.robot) + plain.TRAFFIC_CELL
     clear = request["r"] + fleet.reach(session.robot) + tune.CLAIM_MARGIN
-    session.link.halt()
+    await session.link.halt()
     while time.monotonic() - started < tune.MAKE_WAY_WAIT_S:
-        plans, claims, now = state.read(redis, "plans"), state.read(redis, "claims"), time.time()
-        if not fleet.is_busy(other):
-            break  # done with its instruction
-        if state.read(redis, "waits").get(other, {}).get("for") == session.robot.pk:
-            break  # its way now goes through the spot aside (run af: each waited for the other for 120 s)
-        if other in plans:  # (between two plans, or two tries of a stalled trip, it has not passed: run w)
-            held, cells = claims.get(other), plans[other]["cells"]
-            at = _plan_time_at(cells, held["a"]) if held else None
-            at = now if at is None else at  # where the plan has it now (a robot late on it: run ae)
-            ahead = any(
-                t0 > at and math.dist(plain.center_of((col, row)), home) < near for col, row, t0, _ in cells
-            )
-            if not ahead and (
-                held is None or plain.segment_distance(home, home, held["a"], held["b"]) > clear
-            ):
-                break
+        if await blocking.call(_passed, redis, session.robot.pk, other, home, near, clear):
+            break
         deadline = time.monotonic() + tune.MAKE_WAY_POLL_S
         while time.monotonic() < deadline:
             session.check()
-            session.pose()
+            await session.pose()
     return time.monotonic() - started
+
+
+def _passed(redis, robot_id: int, other: int, home, near: float, clear: float) -> bool:
+    """Whether the robot made way for (other) has passed `home`, is done, or waits for this one (until_passed)."""
+    plans, claims, now = state.read(redis, "plans"), state.read(redis, "claims"), time.time()
+    if not fleet.is_busy(other):
+        return True  # done with its instruction
+    if state.read(redis, "waits").get(other, {}).get("for") == robot_id:
+        return True  # its way now goes through the spot aside (run af: each waited for the other for 120 s)
+    if other not in plans:  # (between two plans, or two tries of a stalled trip, it has not passed: run w)
+        return False
+    held, cells = claims.get(other), plans[other]["cells"]
+    at = _plan_time_at(cells, held["a"]) if held else None
+    at = now if at is None else at  # where the plan has it now (a robot late on it: run ae)
+    ahead = any(t0 > at and math.dist(plain.center_of((col, row)), home) < near for col, row, t0, _ in cells)
+    return not ahead and (held is None or plain.segment_distance(home, home, held["a"], held["b"]) > clear)
 
 
 def _plan_time_at(cells, point) -> float | None:

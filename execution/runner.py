@@ -1,24 +1,26 @@
 """Run executions: each robot's queue drained by whoever holds its Redis lock, one execution at a time.
 
-Dispatch wakes each robot of an instruction with one Celery task (execution.tasks.drain_robot: the robot's
-executor). A task that gets the robot's lock runs the robot's queued executions in order (the instruction's own
-and any queued behind it, whoever sent them); a task that does not get it leaves its execution queued for the
-holder. A preempting
-execution is named in the robot's preempt flag: the holder interrupts the current execution (back in the
-queue, at the step it reached) and runs the preemptor next.
+Dispatch wakes each robot of an instruction (execution.executor.wake); the executor process that owns the
+robot runs `drain_robot` as one asyncio task on its loop, next to the robot's link. A drain that gets the
+robot's lock runs the robot's queued executions in order (the instruction's own and any queued behind it,
+whoever sent them); one that does not get it leaves them queued for the holder. A preempting execution is
+named in the robot's preempt flag: the holder interrupts the current execution (back in the queue, at the
+step it reached) and runs the preemptor next. The database is reached through the process's blocking pool
+(execution.blocking); the lock is kept, and the flags read, by the process's board (execution.board).
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 
-from django.db import close_old_connections
 from django.utils import timezone
 
 import alerts
 import live
 from access import holds
-from execution import coordination, queues
+from execution import blocking, board, coordination, queues
 from execution.handlers import run_step
 from execution.link import LinkError, RobotLink
 from execution.models import Execution, Instruction
@@ -41,23 +43,28 @@ OUTCOME_EVENT = {
 }
 
 
-def drain_robot(robot_id: int) -> bool:
+SHUT_DOWN = "stopped: its executor was shut down"
+
+
+async def drain_robot(robot_id: int) -> bool:
     """Run the robot's waiting executions under its lock; False if another runner holds it."""
-    ran = False
-    while next_execution(robot_id) is not None:
+    ran, kept = False, board.of_loop()
+    while await blocking.call(next_execution, robot_id) is not None:
         lock = coordination.RobotLock(robot_id)
-        if not lock.acquire():
+        if not await blocking.call(lock.acquire):
             return ran
         ran = True
-        heartbeat = coordination.Heartbeat(lock).start()
+        lease = kept.lease(lock)
         try:
+            await lease.fresh()  # the flags as of now (a stop that came before the lock is seen)
             preferred = None
-            while heartbeat.held and (execution := next_execution(robot_id, preferred)) is not None:
-                heartbeat.beat()
-                preferred = run_execution(execution, heartbeat)
+            while lease.held and (execution := await blocking.call(next_execution, robot_id, preferred)):
+                lease.beat()
+                preferred = await run_execution(execution, lease)
         finally:
-            heartbeat.stop()
-            lock.release()
+            kept.drop(lease)
+            with contextlib.suppress(Exception):  # Redis away: the lock lapses within its time to live
+                await asyncio.shield(blocking.call(lock.release))
     return ran
 
 
@@ -86,28 +93,28 @@ def claim(execution: Execution, token: str) -> bool:
     return bool(won)
 
 
-def run_execution(execution: Execution, heartbeat: coordination.Heartbeat) -> int | None:
-    """Run one execution from its current step; return the execution that preempted it, if any."""
-    close_old_connections()
-    coordination.clear_preempt(execution.robot_id, execution.pk)
-    if _held_back(execution):
+async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
+    """Run one execution from its current step; return the execution that preempted it, if any. Its task
+    cancelled (the executor shuts down), the robot is halted and the execution ends saying so."""
+    if not await blocking.call(_begin, execution, lease.token):
         return None
-    if not claim(execution, heartbeat.token):
-        return None
-    execution.refresh_from_db()
-    outcome, words, preemptor = "succeeded", [], None
+    outcome, words, preemptor, shut_down = "succeeded", [], None, False
     link = None
     try:
-        link = RobotLink(execution.robot).open()
-        session = Session(execution, link, heartbeat)
+        link = await blocking.call(_link_of, execution)
+        await link.open()
+        session = Session(execution, link, lease)
         for index in range(execution.step_index, len(execution.steps)):
-            words.append(run_step(session, execution.steps[index]))
-            advance(execution, index + 1)
+            words.append(await run_step(session, execution.steps[index]))
+            await blocking.call(advance, execution, index + 1)
+    except asyncio.CancelledError:
+        outcome, shut_down = "failed", True
+        words.append(SHUT_DOWN)
     except Interrupted as exc:
         outcome, preemptor = exc.outcome, exc.preemptor
         words.append(exc.reason)
     except LinkLost as exc:  # it may still be driving on our last command: a zero as soon as it is back
-        links.owe_zero([execution.robot_id])
+        await blocking.call(links.owe_zero, [execution.robot_id])
         outcome = "failed"
         words.append(str(exc))
     except (StepFailed, LinkError, ValueError) as exc:
@@ -118,19 +125,40 @@ def run_execution(execution: Execution, heartbeat: coordination.Heartbeat) -> in
         outcome = "failed"
         words.append(f"{type(exc).__name__}: {exc}")
     finally:
-        _halt(link)
+        await asyncio.shield(_halt(link))
+    said = "; ".join(words)
+    recorded = await asyncio.shield(blocking.call(_end, execution, lease.token, outcome, said, words[-1:]))
+    if shut_down:
+        raise asyncio.CancelledError
+    return preemptor if recorded else None
+
+
+def _link_of(execution: Execution) -> RobotLink:
+    return RobotLink(execution.robot)
+
+
+def _begin(execution: Execution, token: str) -> bool:
+    """Clear the execution's preempt flag and claim it (unless a stop holds the robot back): whether it runs."""
+    coordination.clear_preempt(execution.robot_id, execution.pk)
+    if _held_back(execution) or not claim(execution, token):
+        return False
+    execution.refresh_from_db()
+    return True
+
+
+def _end(execution: Execution, token: str, outcome: str, said: str, last: list[str]) -> bool:
+    """Record how the execution ended, unless another runner took it since; False when the database refused
+    (the end is kept for the sweep). A failure is one step_failed alert (a stall's robot_stuck alert, if it
+    raised one, becomes this: one event, one alert)."""
     try:
-        ended = finish(execution, heartbeat.token, outcome, "; ".join(words))
+        ended = finish(execution, token, outcome, said)
     except Exception as exc:
-        return _unrecorded(execution, exc, outcome, "; ".join(words))
+        _unrecorded(execution, exc, outcome, said)
+        return False
     if ended and outcome == "failed":
-        alerts.raise_alert(  # a stall's robot_stuck alert, if it raised one, becomes this: one event, one alert
-            "step_failed",
-            execution.robot,
-            f"instruction #{execution.instruction_id}: {words[-1]}",
-            execution.event,
-        )
-    return preemptor
+        words = f"instruction #{execution.instruction_id}: {last[0]}"
+        alerts.raise_alert("step_failed", execution.robot, words, execution.event)
+    return True
 
 
 def _unrecorded(execution: Execution, exc: Exception, outcome: str, words: str) -> None:
@@ -165,7 +193,7 @@ def _held_back(execution: Execution) -> bool:
     return True
 
 
-def _halt(link: RobotLink | None) -> None:
+async def _halt(link: RobotLink | None) -> None:
     """The final zero, and the robot's last pose kept where the fleet reads it (robots.poses): the step stored it
     only every STORE_POSE_EVERY while it ran, so without this the portal could place a robot that has just
     arrived up to half a second of driving short of where it stands (where no pose hub runs, or one lags),
@@ -173,15 +201,16 @@ def _halt(link: RobotLink | None) -> None:
     if link is None:
         return
     try:
-        link.halt()
+        await link.halt()
     except Exception:
         log.warning("%s: could not publish the final zero velocity", link.robot.name)
     if link.poses.value is not None:
         try:
-            pose_store.store_pose(link.robot.pk, link.poses.value)
+            await blocking.call(pose_store.store_pose, link.robot.pk, link.poses.value)
         except Exception:  # the cache is away: the pose hub (or the next step) keeps it later
             log.warning("%s: its last pose could not be kept", link.robot.name, exc_info=True)
-    link.close()
+    with contextlib.suppress(Exception):  # a link that is down has nothing to release
+        await link.close()
 
 
 def finish(execution: Execution, token: str, outcome: str, words: str) -> bool:

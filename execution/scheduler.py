@@ -3,7 +3,7 @@ unfinished are handled.
 
 Every WATCHDOG_S (a quarter second), the watchdog stops the robots of executors that stopped heartbeating and
 fails their executions ("executor lost"). One tick (every half second in `python manage.py scheduler`):
-1. robots with queued executions and no runner get a drain task;
+1. robots with queued executions and no runner are woken again (their executor's sweep finds them too);
 2. each enabled time slot that covers now and has not run today becomes an instruction (source "schedule");
    instructions waiting for a free robot are allocated when one is free (execution.dispatch.retry);
 3. robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle in ready longer than

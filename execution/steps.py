@@ -2,13 +2,15 @@
 
 Each step runs through its action's handler (execution/handlers.py, named by fleetcore/actions.py).
 A Session carries what the control loop needs each tick: the next pose from odometry, the stop and preempt
-flags, the heartbeat that keeps the robot's lock, and the timing stamps (first command published, motion seen
+flags and the lease that keeps the robot's lock (both kept by the process's board, execution.board: reading
+them is no I/O), and the timing stamps (first command published, motion seen
 in odometry). Every motion watches its own progress (Progress): no progress towards its goal for a while is a
 stall, and a motion that takes twice its expected time plus slack is late; both end it with a reason.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import math
 import time
@@ -16,9 +18,9 @@ import uuid
 from dataclasses import dataclass, field
 
 from django.utils import timezone
-from redis.exceptions import RedisError
 
-from execution import coordination
+from execution import blocking
+from execution.board import Lease
 from execution.link import RobotLink
 from execution.models import Execution, Instruction
 from fleetcore import faults, geometry
@@ -74,7 +76,7 @@ class Interrupted(Exception):
 class Session:
     execution: Execution
     link: RobotLink
-    heartbeat: coordination.Heartbeat
+    lease: Lease
     started: float = field(default_factory=time.time)
     seen: int = 0
     last_store: float = field(default_factory=time.monotonic)
@@ -87,27 +89,30 @@ class Session:
     def robot(self):
         return self.link.robot
 
-    def pose(self) -> tuple[float, float, float]:
+    def __post_init__(self) -> None:
+        self.lease.watch(self.execution.pk)
+
+    async def pose(self) -> tuple[float, float, float]:
         """The next odometry pose; a gap stops the robot while waiting, a dropped link or 3 s fail the step,
         and so does odometry the gate refuses (here or in the links process), at once."""
-        self._check_gate()
+        await self._check_gate()
         waited = 0.0
         while True:
-            self.heartbeat.beat()
-            pose, self.seen = self.link.next_pose(self.seen, ODOMETRY_GAP)
-            self._check_gate()
+            self.lease.beat()
+            pose, self.seen = await self.link.next_pose(self.seen, ODOMETRY_GAP)
+            await self._check_gate()
             if pose is not None:
-                self._note_motion(pose)
+                await self._note_motion(pose)
                 return pose
             waited += ODOMETRY_GAP
             if not self.link.connected:
                 raise LinkLost(f"{self.robot.name}: {LINK_LOST} ({self.robot.endpoint} disconnected)")
-            self._zero()  # blind: never keep driving on a command given before odometry stopped
+            await self._zero()  # blind: never keep driving on a command given before odometry stopped
             if waited >= ODOMETRY_TIMEOUT:
                 topic = self.link.odometry.target
                 raise StepFailed(f"{self.robot.name}: no odometry on {topic} for {ODOMETRY_TIMEOUT:g} s")
 
-    def _check_gate(self) -> None:
+    async def _check_gate(self) -> None:
         """StepFailed, the robot told to stop, when its odometry is refused: nothing can be driven on it. A robot
         flagged before the step fails at once; one whose odometry turns bad on the way is halted and given
         FAULT_GRACE_S for a good pose to come back (one hostile frame among good ones costs a pause, not the
@@ -115,53 +120,53 @@ class Session:
         fault = self.link.fault
         if fault is None and not self.gate_checked:
             self.gate_checked = True
-            fault = pose_store.pose_faults([self.robot.pk]).get(self.robot.pk)
+            fault = (await blocking.call(pose_store.pose_faults, [self.robot.pk])).get(self.robot.pk)
             if fault is not None:
-                self._halt_on_fault(fault)
+                await self._halt_on_fault(fault)
         if fault is None:
             return
         with contextlib.suppress(Exception):  # a link that is down cannot take it; the reason is the fault
-            self.link.halt()
+            await self.link.halt()
         deadline = time.monotonic() + FAULT_GRACE_S
         while time.monotonic() < deadline:
-            time.sleep(0.02)
+            await asyncio.sleep(0.02)
             if self.link.fault is None:
                 return
-        self._halt_on_fault(self.link.fault or fault)
+        await self._halt_on_fault(self.link.fault or fault)
 
-    def _halt_on_fault(self, fault: dict) -> None:
+    async def _halt_on_fault(self, fault: dict) -> None:
         with contextlib.suppress(Exception):  # a link that is down cannot take it; the reason is the fault
-            self.link.halt()
+            await self.link.halt()
         raise StepFailed(pose_store.fault_words(self.robot.name, fault))
 
-    def _zero(self) -> None:
+    async def _zero(self) -> None:
         try:
-            self.link.halt()
+            await self.link.halt()
         except Exception as exc:  # the link went down between our look at it and the zero
             raise LinkLost(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
 
     def check(self) -> None:
-        """Raise Interrupted if the robot was stopped or preempted, or its lock was lost; tell the heartbeat."""
-        if not self.heartbeat.held:
-            if self.heartbeat.fault:  # Redis refuses writes (a full disk): a stop cannot be seen; halted here
-                raise Interrupted("failed", f"stopped; {self.heartbeat.why_lost}")
-            raise Interrupted("failed", f"executor lost: {self.heartbeat.why_lost}")
-        self.heartbeat.beat()
-        try:
-            self._check_flags()
-        except RedisError as exc:  # no stop flag or preemption can be seen, no lock kept: not ours to drive
-            words = faults.refusal(
-                exc
-            )  # it answers, but refuses writes: the robot is halted, and that is why
-            raise Interrupted("failed", f"stopped; {words}" if words else f"{REDIS_LOST} ({exc})") from exc
+        """Raise Interrupted if the robot was stopped or preempted, or its lock was lost; tell the lease. No I/O:
+        the flags are the board's last read (so a plan's search may call it from its thread)."""
+        lease = self.lease
+        if not lease.held:
+            if lease.fault:  # Redis refuses writes (a full disk): a stop cannot be seen; halted here
+                raise Interrupted("failed", f"stopped; {lease.why_lost}")
+            raise Interrupted("failed", f"executor lost: {lease.why_lost}")
+        lease.beat()
+        if lease.error is not None:  # no stop flag or preemption can be seen, no lock kept: not ours to drive
+            words = faults.refusal(lease.error)  # it answers, but refuses writes: halted, and that is why
+            raise Interrupted("failed", f"stopped; {words}" if words else f"{REDIS_LOST} ({lease.error})")
+        self._check_flags()
 
     def _check_flags(self) -> None:
-        """Store the pose now and then; raise Interrupted if the robot was stopped or preempted."""
+        """Keep the pose now and then (the board stores it); raise Interrupted if the robot was stopped or
+        preempted."""
         if time.monotonic() - self.last_store > STORE_POSE_EVERY:
             self.last_store = time.monotonic()
             if self.link.poses.value is not None:
-                pose_store.store_pose(self.robot.pk, self.link.poses.value)
-        stopped_at, preemptor, cancelled = coordination.session_flags(self.robot.pk, self.execution.pk)
+                self.lease.keep_pose(self.link.poses.value)
+        stopped_at, preemptor, cancelled = self.lease.flags
         if stopped_at > self.started:
             raise Interrupted("cancelled", "stopped")
         if cancelled is not None:
@@ -169,23 +174,23 @@ class Session:
         if preemptor is not None and preemptor != self.execution.pk:
             raise Interrupted("preempted", f"preempted by instruction of execution {preemptor}", preemptor)
 
-    def send(self, v: float, w: float) -> None:
+    async def send(self, v: float, w: float) -> None:
         """Publish a velocity command (after checking the flags, so a stop is never overridden)."""
         self.check()
         try:
-            self.link.velocity(v, w)
+            await self.link.velocity(v, w)
         except Exception as exc:  # a publish on a dropped link: the step cannot go on
             if not self.link.connected:
                 raise LinkLost(f"{self.robot.name}: {LINK_LOST} ({exc})") from exc
             raise
-        self.mark_commanded()
+        await self.mark_commanded()
 
-    def mark_commanded(self) -> None:
+    async def mark_commanded(self) -> None:
         if not self.commanded:
             self.commanded = True
-            _stamp(self.execution, "first_command_at")
+            await blocking.call(_stamp, self.execution, "first_command_at")
 
-    def _note_motion(self, pose) -> None:
+    async def _note_motion(self, pose) -> None:
         if self.origin is None:
             self.origin = pose
             return
@@ -194,7 +199,7 @@ class Session:
         moved = math.hypot(pose[0] - self.origin[0], pose[1] - self.origin[1])
         if moved > MOVED or abs(geometry.wrap(pose[2] - self.origin[2])) > TURNED:
             self.moving = True
-            _stamp(self.execution, "motion_started_at")
+            await blocking.call(_stamp, self.execution, "motion_started_at")
 
 
 def _stamp(execution: Execution, field_name: str) -> None:
@@ -246,22 +251,24 @@ def _heading_error(pose, goal) -> float:
     return abs(geometry.wrap(math.atan2(goal[1] - pose[1], goal[0] - pose[0]) - pose[2]))
 
 
-def at_rest(session: Session) -> tuple[float, float, float]:
+async def at_rest(session: Session) -> tuple[float, float, float]:
     """Stop the robot and read odometry until it has come to rest (two poses within REST_M, at most
     REST_LIMIT_S): where it stands. Where a step ends is judged from it, not from the pose as the robot was told
     to stop: a robot slows down within its acceleration limit (a Husky, 1 m/s², goes on 0.5 m from 1 m/s)."""
-    session.link.halt()
+    await session.link.halt()
     deadline = time.monotonic() + tune.REST_LIMIT_S
-    before = session.pose()
+    before = await session.pose()
     while time.monotonic() < deadline:
-        now = session.pose()
+        now = await session.pose()
         if math.dist(before[:2], now[:2]) < tune.REST_M:
             return now
         before = now
     return before
 
 
-def drive(session: Session, controller, limit_s: float, stall_s: float | None = None, goal=None) -> None:
+async def drive(
+    session: Session, controller, limit_s: float, stall_s: float | None = None, goal=None
+) -> None:
     """Run a velocity controller tick by tick on odometry until it is done, watching its progress.
 
     stall_s: raise Stalled when the robot makes no progress (towards `goal`, or at all) for that long while
@@ -269,40 +276,42 @@ def drive(session: Session, controller, limit_s: float, stall_s: float | None = 
     """
     progress = Progress(limit_s, stall_s if stall_s is not None else math.inf, goal)
     while True:
-        pose = session.pose()
+        pose = await session.pose()
         command = controller.command(pose)
         if command.done:
-            session.link.halt()
+            await session.link.halt()
             return
         verdict = progress.update(pose)
         if verdict == "late":
-            session.link.halt()
+            await session.link.halt()
             raise StepFailed(f"{session.robot.name}: did not finish within {limit_s:.0f} s")
         if verdict == "stalled":
-            session.link.halt()
+            await session.link.halt()
             raise Stalled(
                 f"{session.robot.name}: no progress for {progress.window:g} s near ({pose[0]:.1f}, {pose[1]:.1f})",
                 pose,
             )
-        session.send(command.v, command.w)
+        await session.send(command.v, command.w)
 
 
 def _moved(before, after) -> bool:
     return math.dist(before[:2], after[:2]) > MOVED or abs(geometry.wrap(after[2] - before[2])) > TURNED
 
 
-def navigate(session: Session, x: float, y: float, limit_s: float, stall_s: float | None = None) -> None:
+async def navigate(
+    session: Session, x: float, y: float, limit_s: float, stall_s: float | None = None
+) -> None:
     """Hand the goal to the robot's navigation stack and follow its status to the end."""
     session.check()
-    goal = session.link.navigate(x, y, 0.0, f"fleet-{session.execution.pk}-{uuid.uuid4().hex[:8]}")
-    session.mark_commanded()
-    follow_goal(session, goal, limit_s, "navigation", stall_s)
+    goal = await session.link.navigate(x, y, 0.0, f"fleet-{session.execution.pk}-{uuid.uuid4().hex[:8]}")
+    await session.mark_commanded()
+    await follow_goal(session, goal, limit_s, "navigation", stall_s)
 
 
 NAV_WORDS = {"failed": "aborted", "cancelled": "cancelled"}  # what a stack's outcome means to a person
 
 
-def follow_goal(
+async def follow_goal(
     session: Session, goal, limit_s: float, what: str, stall_s: float | None = None, toward: bool = True
 ) -> None:
     """Follow a goal the robot's own stack runs (navigation, docking) until it ends; cancel it on any exit.
@@ -315,7 +324,7 @@ def follow_goal(
     progress = Progress(limit_s, stall_s if stall_s is not None else math.inf, target)
     try:
         while True:
-            pose = session.pose()
+            pose = await session.pose()
             session.check()
             outcome = session.link.goal_outcome(goal, pose)
             if outcome == "succeeded":
@@ -323,7 +332,7 @@ def follow_goal(
             if outcome == "failed":
                 raise Aborted(f"{session.robot.name}: {what} {NAV_WORDS[outcome]}")
             if outcome in NAV_WORDS:
-                _stop_behind_cancel(session)
+                await _stop_behind_cancel(session)
                 raise StepFailed(f"{session.robot.name}: {what} {NAV_WORDS[outcome]}")
             verdict = progress.update(pose)
             if verdict == "late":
@@ -334,20 +343,20 @@ def follow_goal(
                 )
     except BaseException:
         with contextlib.suppress(Exception):  # a link that is down cannot take it; the first reason is kept
-            session.link.halt(goal)
+            await session.link.halt(goal)
         raise
 
 
 CANCEL_GRACE_S = 0.5  # a stop sends its zeros and cancels first and raises its flags after (fast_stop)
 
 
-def _stop_behind_cancel(session: Session) -> None:
+async def _stop_behind_cancel(session: Session) -> None:
     """A stack's goal cancelled from outside is, most often, a person's stop whose flags are not up yet: look for
     them a moment (Interrupted: the step ends "stopped", not failed) before calling it the stack's doing."""
     deadline = time.monotonic() + CANCEL_GRACE_S
     while time.monotonic() < deadline:
         session.check()
-        time.sleep(0.05)
+        await asyncio.sleep(0.05)
 
 
 def travel_time(distance: float, turn: float, limits: Limits) -> float:

@@ -1,20 +1,10 @@
-"""Celery tasks of the fleet: thin, idempotent, taking primary keys (queues: instructions, control)."""
+"""Celery tasks of the execution app: thin, idempotent, taking primary keys (queue: control). Instructions run
+in the executor processes (execution/executor.py), not here."""
 
 from celery import shared_task
 from django.contrib.auth import get_user_model
 
-from execution import runner
 from execution.control import stop
-
-
-@shared_task(name="execution.tasks.drain_robot", acks_late=True, ignore_result=True)
-def drain_robot(robot_id: int) -> bool:
-    """The robot's executor: run its waiting executions in order, unless another runner holds its lock.
-
-    One task per robot per wake-up (dispatch sends one for each robot of an instruction; the watchdog one
-    for a robot whose queue stalled); a redelivery finds the executions claimed or finished and does nothing.
-    """
-    return runner.drain_robot(robot_id)
 
 
 @shared_task(name="execution.tasks.stop_robots", acks_late=True, ignore_result=True)

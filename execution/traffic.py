@@ -45,6 +45,7 @@ first: their goals never conflict with the reservations (execution.steps.navigat
 
 from __future__ import annotations
 
+import asyncio
 import functools
 import itertools
 import logging
@@ -52,7 +53,7 @@ import math
 import time
 
 import live
-from execution import coordination, route, signals
+from execution import blocking, coordination, route, signals
 from execution import traffic_fleet as fleet
 from execution import traffic_state as state
 from execution.steps import Session, StepFailed, at_rest
@@ -433,7 +434,7 @@ def yet_to_pass(robot: Robot, spot) -> bool:
     return False
 
 
-def wait_for(session: Session, start, end, planned=None, ahead=(), gone_round=frozenset()) -> None:
+async def wait_for(session: Session, start, end, planned=None, ahead=(), gone_round=frozenset()) -> None:
     """Claim the stretch, waiting while another robot is in the way (or is planned there first: claim());
     raise Reroute to break a deadlock or to go around a robot that is not under way; StepFailed after
     WAIT_LIMIT_S. planned: the stretch's (t0, t1) in the robot's plan; ahead: the rest of the plan's points.
@@ -448,48 +449,72 @@ def wait_for(session: Session, start, end, planned=None, ahead=(), gone_round=fr
     robot, redis = session.robot, coordination.connection()
     started = same_since = noted = told = time.monotonic()
     last, name, everyone, why, asked = None, "", None, [], False
-    while (blocker := claim(robot, start, end, session.check, everyone, planned, why)) is not None:
+    while (
+        blocker := await blocking.call(claim, robot, start, end, session.check, everyone, planned, why)
+    ) is not None:
         now = time.monotonic()
         if blocker != last:
             if last is None:  # it waits where it comes to rest: it holds that room, not the stretch behind
-                here = at_rest(session)[:2]
-                claim(robot, here, here, session.check, everyone, planned)
+                here = (await at_rest(session))[:2]
+                await blocking.call(claim, robot, here, here, session.check, everyone, planned)
             same_since, last = now, blocker
-            name = Robot.objects.filter(pk=blocker).values_list("name", flat=True).first() or f"#{blocker}"
+            name = await blocking.call(_name_of, blocker)
             log.debug("traffic: %s waits for %s to go from %s to %s", robot.name, name, start, end)
-            live.path(robot, None, name)
+            await blocking.call(live.path, robot, None, name)
             noted = -math.inf
         if now - noted >= tune.NOTE_WAIT_S:
-            noted, everyone = now, _standing(redis, {robot.pk})
-            wanted = [[round(v, 2) for v in point[:2]] for point in (start, end)]
-            entry = {"for": blocker, "why": why[-1], "to": wanted, "expires": time.time() + 2.0}
-            state.write(redis, "waits", robot.pk, entry)
-            state.renew(redis, robot.pk)
-            _check_deadlock(redis, robot.pk)
-            if now - same_since > tune.REROUTE_AFTER_S and _parked(redis, blocker, now - same_since):
-                if not asked and blocker in gone_round and blocker not in _not_to_ask(redis, robot):
-                    state.request_way(redis, robot, fleet.reach(robot), {blocker: None}, [start, *ahead])
-                    ask_to_make_way(robot)  # it waits on: _parked() is False while the request stands
+            noted = now
+            everyone = await blocking.call(_note_wait, redis, robot, blocker, why[-1], (start, end))
+            parked = now - same_since > tune.REROUTE_AFTER_S and await blocking.call(
+                _parked, redis, blocker, now - same_since
+            )
+            if parked:
+                if (
+                    not asked
+                    and blocker in gone_round
+                    and blocker not in await blocking.call(_not_to_ask, redis, robot)
+                ):
+                    await blocking.call(_ask_way, redis, robot, blocker, [start, *ahead])
                     asked, same_since = True, now
                     continue
                 log.info("traffic: %s goes round %s, which stands in its way", robot.name, name)
                 raise Reroute({blocker})
         if now - told >= tune.TELL_WAIT_S:
             told = now
-            log.info(
-                "traffic: %s has waited %.0f s for %s (%s)",
-                robot.name,
-                now - started,
-                name,
-                _doing(redis, blocker),
-            )
+            doing = await blocking.call(_doing, redis, blocker)
+            log.info("traffic: %s has waited %.0f s for %s (%s)", robot.name, now - started, name, doing)
         if now - started > tune.WAIT_LIMIT_S:
             raise StepFailed(f"{robot.name}: waited {tune.WAIT_LIMIT_S:.0f} s for {name} to make way")
         session.check()
-        time.sleep(tune.WAIT_POLL_S)
-        session.pose()  # a robot waiting still reads where it is (and odometry that stops fails the step)
+        await asyncio.sleep(tune.WAIT_POLL_S)
+        await (
+            session.pose()
+        )  # a robot waiting still reads where it is (and odometry that stops fails the step)
     if last is not None:
-        live.path(robot, None, None)
+        await blocking.call(live.path, robot, None, None)
+
+
+def _name_of(robot_id: int) -> str:
+    return Robot.objects.filter(pk=robot_id).values_list("name", flat=True).first() or f"#{robot_id}"
+
+
+def _note_wait(redis, robot: Robot, blocker: int, why: str, stretch) -> list:
+    """Note whom the robot waits for (and why), keep its claim alive, look for a cycle of waits (Reroute when
+    this robot is the one to give way); the robots standing, read afresh."""
+    everyone = _standing(redis, {robot.pk})
+    wanted = [[round(v, 2) for v in point[:2]] for point in stretch]
+    entry = {"for": blocker, "why": why, "to": wanted, "expires": time.time() + 2.0}
+    state.write(redis, "waits", robot.pk, entry)
+    state.renew(redis, robot.pk)
+    _check_deadlock(redis, robot.pk)
+    return everyone
+
+
+def _ask_way(redis, robot: Robot, blocker: int, route_points) -> None:
+    """Ask a parked robot in the way to make way along the route (it waits on: _parked() is False while the
+    request stands)."""
+    state.request_way(redis, robot, fleet.reach(robot), {blocker: None}, route_points)
+    ask_to_make_way(robot)
 
 
 def _doing(redis, robot_id: int) -> str:

@@ -31,7 +31,7 @@ from django.db import connections
 from django.utils import timezone
 
 import alerts
-from execution import coordination, dispatch, traffic_state
+from execution import coordination, executor, traffic_state
 from execution.link import publish_zero
 from execution.models import Execution
 from execution.runner import WAITING, settle
@@ -154,10 +154,11 @@ def stalled_robots() -> list[int]:
 
 
 def kick_stalled() -> list[int]:
-    """Send a drain task for each stalled robot (at most one every few seconds per robot)."""
-    kicked = []
-    for robot_id in stalled_robots():
-        if coordination.connection().set(coordination.key("kick", robot_id), 1, nx=True, ex=5):
-            dispatch.launch("drain_robot", robot_id)
-            kicked.append(robot_id)
+    """Wake the executors for the stalled robots, in one message (each robot at most once every few seconds)."""
+    kicked = [
+        robot_id
+        for robot_id in stalled_robots()
+        if coordination.connection().set(coordination.key("kick", robot_id), 1, nx=True, ex=5)
+    ]
+    executor.wake(kicked)
     return kicked

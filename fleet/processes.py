@@ -37,16 +37,14 @@ def database_url(db: dict) -> str:
 
 
 def fleet_env() -> dict[str, str]:
-    """This process's environment with what a fleet process needs to share its database, Redis, keys, world and
-    execution queue (as they are in settings now, which a test may have changed since start-up)."""
+    """This process's environment with what a fleet process needs to share its database, Redis, keys and world (as
+    they are in settings now, which a test may have changed since start-up)."""
     shared = {
         "DJANGO_SETTINGS_MODULE": settings.SETTINGS_MODULE,
         "DATABASE_URL": database_url(connection.settings_dict),
         "REDIS_URL": settings.REDIS_URL,
         "FLEET_REDIS_PREFIX": settings.CACHES["default"].get("KEY_PREFIX"),
         "FLEET_EXEC_KEY_PREFIX": getattr(settings, "FLEET_EXEC_KEY_PREFIX", None),
-        "FLEET_EXECUTE": settings.FLEET_EXECUTE,
-        "FLEET_EXECUTE_QUEUE": settings.FLEET_EXECUTE_QUEUE,
         "FLEET_WORLD": getattr(settings, "FLEET_WORLD", None),
     }
     return {**os.environ, **{name: str(value) for name, value in shared.items() if value is not None}}

@@ -7,6 +7,7 @@ its death reach the terminal with its name in front. One Ctrl-C stops everything
     FLEET_SIM_PORT_BASE  the simulated endpoints' first port (9090; the demo world uses seven from there)
     FLEET_VAR_DIR        the database, Redis's data, the logs (var/log/) and the supervisor's files (var/)
     REDIS_URL            a Redis to use; unset, an embedded one is run (and restarted) under var/
+    FLEET_EXECUTORS      how many executor processes run the robots' instructions (1; execution/executor.py)
     FLEET_SIM_OPTIONS    more options for the simulator (e.g. `--keep-last-command`, as the chaos tests run it)
 
 `supervisorctl -c var/supervisord.conf status` shows the processes while it runs.
@@ -60,6 +61,7 @@ class Setup:
     world: str
     redis_url: str | None  # None: the embedded Redis
     sim_options: tuple[str, ...] = ()
+    executors: int = 1  # executor processes: executor-1 .. executor-N
 
     @classmethod
     def from_env(cls, environ=os.environ) -> Setup:
@@ -70,6 +72,7 @@ class Setup:
             world=environ.get("FLEET_WORLD", "paper"),
             redis_url=environ.get("REDIS_URL") or None,
             sim_options=tuple(shlex.split(environ.get("FLEET_SIM_OPTIONS", ""))),
+            executors=int(environ.get("FLEET_EXECUTORS", "1")),
         )
 
     @property
@@ -99,15 +102,17 @@ class Setup:
 
 
 # Heartbeat bounds (fleet/hangwatch.py): an alert past the first, a restart past the second. The links process is
-# alerted on within 2 s of hanging (issue 31: a frozen fleet must not look live); the scheduler's pass and a
-# worker's beat (from a thread) get more room: a busy database may rightly hold a pass for seconds.
+# alerted on within 2 s of hanging (issue 31: a frozen fleet must not look live), and so is an executor, whose loop
+# sends the robots' commands and leaves every query to a thread; the scheduler's pass and a worker's beat (from a
+# thread) get more room: a busy database may rightly hold a pass for seconds.
 QUICK, ROOMY = Bounds(alert_s=1.0, restart_s=5.0), Bounds(alert_s=3.0, restart_s=15.0)
 HANGWATCH = Bounds(alert_s=10.0, restart_s=10.0)  # watched by `make run` itself: no alert, only a restart
 
 
 def programs(setup: Setup, python: str = sys.executable) -> list[Program]:
     """The system's processes; the embedded Redis first (started with the supervisor, stopped last). Redis, the
-    scheduler and the links process are single (one per var folder, always: a lock each); the rest beat."""
+    scheduler and the links process are single (one per var folder, always: a lock each); the rest beat. The
+    robots are spread over setup.executors executor processes (execution/executor.py)."""
     manage = [python, "manage.py"]
     celery = [python, "-m", "celery", "-A", "fleet", "-q", "worker", "-l", "warning"]
     sim_ports = ["--port-base", str(setup.sim_port_base)]
@@ -115,11 +120,11 @@ def programs(setup: Setup, python: str = sys.executable) -> list[Program]:
     web_options += ["--timeout-graceful-shutdown", "5", "--no-proxy-headers"]  # portal/clientaddr.py decides
     listed = [
         Program("web", [python, "-m", "uvicorn", "fleet.asgi:application", *web_options], hung=QUICK),
-        # Instructions block while robots move, so that worker runs many threads; stops and registrations
-        # have a worker of their own and never wait behind a long instruction.
+        # The default queue (still named instructions) carries recordings and experiment runs, which wait most
+        # of their time: a few threads. Stops and registrations have a worker of their own.
         Program(
             "worker",
-            [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "32"],
+            [*celery, "-n", "instructions@%h", "-Q", "instructions", "-P", "threads", "-c", "8"],
             hung=ROOMY,
         ),
         Program(
@@ -136,6 +141,8 @@ def programs(setup: Setup, python: str = sys.executable) -> list[Program]:
         ),
         # time slots, lost workers, stalled robot queues (issue 6)
         Program("scheduler", [*manage, "scheduler"], single=True, hung=ROOMY),
+        # the robots' instructions: one asyncio task per robot, each robot run by one of them (issue 34)
+        *(Program(f"executor-{n}", [*manage, "executor"], hung=QUICK) for n in range(1, setup.executors + 1)),
     ]
     watched = [f"{program.name}:{program.hung.alert_s:g}:{program.hung.restart_s:g}" for program in listed]
     # restarts a hung process; it beats too, and `make run` itself restarts it if it hangs (wait_watching)

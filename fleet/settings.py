@@ -134,7 +134,6 @@ CELERY_TASK_ROUTES = {
     "robots.tasks.*": {"queue": "registration"},
     "simworker.tasks.*": {"queue": "sim"},
     "execution.tasks.stop_*": {"queue": "control"},
-    "execution.tasks.*": {"queue": "instructions"},
 }
 # Redis lost and back: workers retry the broker for ever (Celery's default gives up after 100 tries and exits), and
 # a connection that went quiet is found by a PING every 10 s. A message taken but never acknowledged (its worker
@@ -252,10 +251,7 @@ FLEET_IDLE_TIMEOUT_SECONDS = 600
 # A question of the interpreter's nobody answers expires after this long (execution/sweeps.py): cancelled with a
 # note ("expired: no answer within 10 min"), its robots back to ready, gone from the console's Progress.
 FLEET_QUESTION_EXPIRY_SECONDS = env_int("FLEET_QUESTION_EXPIRY_SECONDS", 600, minimum=10)
-# Execution (issue 6): where instructions run (celery workers, or "thread" in-process for tests), an optional
-# queue override, and the Redis key prefix of robot locks and flags (distinct per test run).
-FLEET_EXECUTE = os.environ.get("FLEET_EXECUTE", "celery")
-FLEET_EXECUTE_QUEUE = os.environ.get("FLEET_EXECUTE_QUEUE", "")
+# Execution (issue 6): the Redis key prefix of robot locks, flags and executor membership (distinct per test run).
 FLEET_EXEC_KEY_PREFIX = os.environ.get("FLEET_EXEC_KEY_PREFIX", "fleet:exec")
 # The links process's stop socket (robots/stopsocket.py): a fresh CLI's stop is zeroed there, on links kept up.
 FLEET_STOP_SOCKET = VAR_DIR / "proc" / "stop.sock"

@@ -1,5 +1,7 @@
 """Fixtures shared by every app's tests."""
 
+import uuid
+
 import pytest
 from django.contrib.auth.models import Group, User
 
@@ -93,6 +95,23 @@ def client_for(client):
         return client
 
     return _login
+
+
+@pytest.fixture
+def exec_settings(settings):
+    """Redis keys of our own (locks, flags, the executors' membership and wake-ups)."""
+    settings.FLEET_EXEC_KEY_PREFIX = f"test:exec:{uuid.uuid4().hex[:8]}"
+    return settings
+
+
+@pytest.fixture
+def executor(exec_settings, transactional_db):
+    """The executor (execution/executor.py), its loop on a thread of this process: the one that runs what
+    dispatch wakes, as `manage.py executor` does. Stopped before the database is emptied."""
+    from execution import executor as executors
+
+    with executors.in_thread() as running:
+        yield running
 
 
 @pytest.fixture

@@ -7,7 +7,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from tests.execution.conftest import exec_settings, turtle_world  # noqa: F401
+from tests.execution.conftest import turtle_sim, turtle_world  # noqa: F401
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.timeout(180)]
 

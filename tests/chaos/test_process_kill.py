@@ -30,18 +30,18 @@ pytestmark = [pytest.mark.slow, pytest.mark.alone, pytest.mark.timeout(300)]
 
 # In an order that keeps every drive short (under 2 m): the turtlebot leaves its start pose on the first and the
 # last fault, which stop it on the way.
-FAULTS = ["worker", "web", "control", "links", "scheduler", "sim", "redis"]
+FAULTS = ["executor-1", "web", "worker", "control", "links", "scheduler", "sim", "redis"]
 BACK_WITHIN = 10.0  # s: the supervisor has started the killed process again under a new pid
 UP_WITHIN = 60.0  # s: ... and it stayed up START_SECONDS (generous: the machine may be busy)
 AT_REST_WITHIN, FINAL_WITHIN = 2.0, 10.0  # s after the fault (issue 14)
 MOVING_WITHIN = 60.0  # s from submitting until the robot drives (interpreting on a busy 2-core machine)
 
-# The faults that take the instruction's executor away, and the reason its failure gives. The instructions
-# worker is the executor (its threads drive the robots); a killed simulator is the robot's endpoint killed and
+# The faults that take the instruction's executor away, and the reason its failure gives. The executor process
+# drives the robots (one asyncio task each); a killed simulator is the robot's endpoint killed and
 # restarted (the robot comes back at its start pose, at rest); a killed Redis takes the executor's lock (its
-# heartbeat cannot renew it), so the executor stops its robot itself. Every other process is not in the
+# board cannot renew it), so the executor stops its robot itself. Every other process is not in the
 # instruction's path: the robot drives on to its goal.
-ENDS_IT = {"worker": "executor lost", "sim": "link lost", "redis": "executor lost"}
+ENDS_IT = {"executor-1": "executor lost", "sim": "link lost", "redis": "executor lost"}
 
 ROBOT, START = (
     "turtlebot",

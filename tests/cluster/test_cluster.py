@@ -125,7 +125,7 @@ def test_the_fleet_survives_losing_an_executor_host_a_web_host_and_a_simulator_s
         # ran are settled (failed "executor lost", docs/fault-survival.md, "Executor lost") within 10 s; work
         # queued behind them goes on on exec2 (or is settled).
         killed = cluster.kill_host("exec1")
-        assert len(killed) >= 2  # the instructions worker and the control worker (and their pool)
+        assert len(killed) >= 2  # the executor and the control worker (and its pool)
         lost = time.monotonic()
 
         def status(pk: int) -> str:

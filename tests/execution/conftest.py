@@ -1,7 +1,6 @@
 """Fixtures for execution tests: a simulated world, its robots registered in the test database, fast settings."""
 
 import os
-import uuid
 
 import pytest
 
@@ -17,14 +16,6 @@ def pytest_configure(config):
         db.setdefault("TEST", {})["NAME"] = f"/tmp/fleet-test-{os.getpid()}.sqlite3"
         # Many runner threads write at once: take the write lock at BEGIN, not on the first write.
         db.setdefault("OPTIONS", {}).setdefault("transaction_mode", "IMMEDIATE")
-
-
-@pytest.fixture
-def exec_settings(settings):
-    """Run executions in threads of the test process, with Redis keys of our own."""
-    settings.FLEET_EXECUTE = "thread"
-    settings.FLEET_EXEC_KEY_PREFIX = f"test:exec:{uuid.uuid4().hex[:8]}"
-    return settings
 
 
 def register(sim, keys, world="paper"):
@@ -48,15 +39,21 @@ def register(sim, keys, world="paper"):
 
 
 @pytest.fixture
-def turtle_world(exec_settings, transactional_db):
-    """The paper world with the turtlebot endpoint registered, at twice real time."""
+def turtle_sim(exec_settings, transactional_db):
+    """The paper world with the turtlebot endpoint registered, at twice real time; no executor runs here."""
     with running_world("paper", endpoints=["turtlebot"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["turtlebot"])
         yield sim
 
 
 @pytest.fixture
-def warehouse_pair(exec_settings, transactional_db):
+def turtle_world(executor, turtle_sim):
+    """turtle_sim with the executor running in this process."""
+    return turtle_sim
+
+
+@pytest.fixture
+def warehouse_pair(executor):
     """The warehouse with its Huskies and TurtleBots registered (28 robots), at twice real time."""
     with running_world("warehouse", endpoints=["husky", "tb3"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["husky", "tb3"], world="warehouse")
@@ -64,7 +61,7 @@ def warehouse_pair(exec_settings, transactional_db):
 
 
 @pytest.fixture
-def demo_world(exec_settings, transactional_db):
+def demo_world(executor):
     """The paper world's demo fleet: robot1..4, turtlebot, husky and tiago, registered; twice real time."""
     with running_world("paper", endpoints=["robots", "turtlebot", "husky", "tiago"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["robots", "turtlebot", "husky", "tiago"])
@@ -72,7 +69,7 @@ def demo_world(exec_settings, transactional_db):
 
 
 @pytest.fixture
-def table12_world(exec_settings, transactional_db):
+def table12_world(executor):
     """Turtlebot, husky and tiago registered, with the paper's Table 12 time slots enabled."""
     from execution.models import TimeSlot
 

@@ -43,7 +43,7 @@ def fleet(db):
 @pytest.fixture
 def no_runner(exec_settings, monkeypatch):
     """Instructions are stored and dispatched; nothing starts running them."""
-    monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)
+    monkeypatch.setattr(dispatch.executor, "wake", lambda robot_ids: None)
 
 
 def to(x, y, name="P", task=None, action="move"):

@@ -1,5 +1,6 @@
 """A robot commanded to move that makes no progress is stalled: the route is planned again, not pushed into."""
 
+import asyncio
 import math
 import time
 from types import SimpleNamespace
@@ -15,14 +16,17 @@ class StuckSession:
 
     def __init__(self):
         self.robot = SimpleNamespace(name="tb")
-        self.link = SimpleNamespace(halt=lambda: self.sent.append("halt"))
+        self.link = SimpleNamespace(halt=self.halt)
         self.sent = []
 
-    def pose(self):
-        time.sleep(0.02)
+    async def halt(self):
+        self.sent.append("halt")
+
+    async def pose(self):
+        await asyncio.sleep(0.02)
         return (0.0, 0.0, 0.0)
 
-    def send(self, v, w):
+    async def send(self, v, w):
         self.sent.append((v, w))
 
 
@@ -33,7 +37,7 @@ def test_a_robot_that_does_not_move_is_stalled_and_halted():
     session = StuckSession()
     controller = motion.GoToGoal((1.0, 0.0), LIMITS)
     with pytest.raises(Stalled, match=r"tb: no progress for 0.3 s near \(0\.0, 0\.0\)"):
-        drive(session, controller, limit_s=10.0, stall_s=0.3, goal=(1.0, 0.0))
+        asyncio.run(drive(session, controller, limit_s=10.0, stall_s=0.3, goal=(1.0, 0.0)))
     assert session.sent[-1] == "halt"
     assert any(isinstance(c, tuple) and c[0] > 0 for c in session.sent)  # it was told to drive
 
@@ -41,7 +45,7 @@ def test_a_robot_that_does_not_move_is_stalled_and_halted():
 def test_without_blocked_detection_only_the_time_limit_ends_it():
     session = StuckSession()
     with pytest.raises(StepFailed) as failure:
-        drive(session, motion.GoToGoal((1.0, 0.0), LIMITS), limit_s=0.3)
+        asyncio.run(drive(session, motion.GoToGoal((1.0, 0.0), LIMITS), limit_s=0.3))
     assert not isinstance(failure.value, Stalled)
     assert "did not finish within" in str(failure.value)
 
@@ -117,12 +121,12 @@ class CoastingSession(StuckSession):
         self.xs = iter(steps)
         self.x = 0.0
 
-    def pose(self):
+    async def pose(self):
         self.x = next(self.xs, self.x)
         return (self.x, 0.0, 0.0)
 
 
 def test_where_a_step_ended_is_read_once_the_robot_is_at_rest_not_as_it_was_told_to_stop():
     session = CoastingSession([1.00, 1.04, 1.07, 1.09, 1.10, 1.10])
-    assert at_rest(session) == (1.10, 0.0, 0.0)  # not 1.00, where it was when told to stop
+    assert asyncio.run(at_rest(session)) == (1.10, 0.0, 0.0)  # not 1.00, where it was when told to stop
     assert session.sent == ["halt"]

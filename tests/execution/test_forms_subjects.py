@@ -21,7 +21,7 @@ SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
 def fleet(seeded_ontology, exec_settings, monkeypatch):
     """The paper world's places; two TurtleBots and a Husky, ready, with poses; nothing starts running."""
     load_world_into_db("paper")
-    monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)
+    monkeypatch.setattr(dispatch.executor, "wake", lambda robot_ids: None)
     made = {}
     for name, model, x, y in (
         ("tb_near", "turtlebot3_burger", 1.0, 1.0),

@@ -21,7 +21,7 @@ STILL_M = 0.03  # m: tiago's odometry may wobble this much at rest, no more
 
 
 @pytest.fixture
-def three(exec_settings, transactional_db):
+def three(executor):
     """turtlebot, husky and tiago of the paper world, registered; twice real time."""
     with running_world("paper", endpoints=["turtlebot", "husky", "tiago"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["turtlebot", "husky", "tiago"])

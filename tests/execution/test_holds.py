@@ -39,7 +39,7 @@ D = (5.0, 5.0)
 def fleet(db, exec_settings, monkeypatch):
     """The paper map; a helper adding an online, ready robot with a pose; nothing starts running."""
     load_world_into_db("paper")
-    monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)
+    monkeypatch.setattr(dispatch.executor, "wake", lambda robot_ids: None)
     made = []
 
     def add(name, x, y):

@@ -15,7 +15,7 @@ pytestmark = [pytest.mark.timeout(120), pytest.mark.slow, pytest.mark.usefixture
 
 
 @pytest.fixture
-def spot_world(exec_settings, transactional_db):
+def spot_world(executor):
     from simworker.testing import running_world
 
     with running_world("paper", endpoints=["spot"], time_scale=2.0) as sim:

@@ -21,7 +21,7 @@ FREE = re.compile(r"at a free spot (?P<d>[\d.]+) m (?P<dir>[a-z-]+) of A; A is t
 
 
 @pytest.fixture
-def paper_world(exec_settings, transactional_db):
+def paper_world(executor):
     """robot1..4, husky and tiago of the paper world registered, at twice real time."""
     with running_world("paper", endpoints=["robots", "husky", "tiago"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["robots", "husky", "tiago"])

@@ -23,7 +23,7 @@ pytestmark = [pytest.mark.timeout(120), pytest.mark.usefixtures("seeded_ontology
 
 
 @pytest.fixture
-def tiago_world(exec_settings, transactional_db):
+def tiago_world(executor):
     """The paper world with TIAGo alone registered, at twice real time."""
     with running_world("paper", endpoints=["tiago"], time_scale=2.0) as sim:
         sim.robots = register(sim, ["tiago"])

@@ -62,7 +62,8 @@ def own_redis(settings):
 
 @pytest.fixture
 def stop_world(own_redis, exec_settings, transactional_db, fleet_admin, client):
-    """Turtlebot and husky registered, keeping their last command (a robot at rest is the portal's doing)."""
+    """Turtlebot and husky registered, keeping their last command (a robot at rest is the portal's doing); no
+    executor runs (the robots are driven straight on their links)."""
     with running_world("paper", endpoints=list(ROBOTS)) as sim:
         sim.robots = register(sim, list(ROBOTS))
         for name in ROBOTS:
@@ -213,7 +214,7 @@ class HungWorker(Fault):
     """The instructions worker takes nothing: an instruction for turtlebot stays queued until the stop."""
 
     def __init__(self, monkeypatch, user) -> None:
-        monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)
+        monkeypatch.setattr(dispatch.executor, "wake", lambda robot_ids: None)
         self.user = user
 
     def apply(self) -> None:

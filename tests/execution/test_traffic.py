@@ -1,5 +1,6 @@
 """The traffic table in Redis: reservations, claims, waits and deadlocks (no simulator; the robots are rows)."""
 
+import asyncio
 import itertools
 import math
 import time
@@ -22,8 +23,9 @@ SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
 
 
 @pytest.fixture
-def robots(db, exec_settings):
-    """Three small robots on the paper map, standing apart (their poses in the pose store)."""
+def robots(transactional_db, exec_settings):
+    """Three small robots on the paper map, standing apart (their poses in the pose store). Committed: the
+    steps' database calls run on the executor's blocking pool, in threads of their own."""
     load_world_into_db("paper")
     made = {}
     for name, (x, y) in {"a": (-2.0, 0.0), "b": (0.0, -2.0), "c": (4.0, 4.0)}.items():
@@ -120,7 +122,7 @@ def test_a_waiting_robot_notes_the_stretch_it_waits_to_drive_and_a_deadlock_log_
     monkeypatch.setattr(tune, "WAIT_LIMIT_S", 0.3)
     assert traffic.claim(b, (0.0, -2.0), (0.0, 2.0)) is None  # b holds a stretch across a's way
     with pytest.raises(StepFailed):
-        traffic.wait_for(StandingSession(a, (-2.0, 0.0, 0.0)), (-2.0, 0.0), (2.0, 0.0))
+        asyncio.run(traffic.wait_for(StandingSession(a, (-2.0, 0.0, 0.0)), (-2.0, 0.0), (2.0, 0.0)))
     redis = coordination.connection()
     wait = traffic_state.read(redis, "waits")[a.pk]
     assert (wait["for"], wait["why"], wait["to"]) == (b.pk, "room", [[-2.0, 0.0], [2.0, 0.0]])
@@ -363,12 +365,16 @@ class StandingSession:
 
     def __init__(self, robot, pose):
         self.robot, self._pose, self.sent = robot, pose, []
-        self.link = types.SimpleNamespace(clock=motion.ClockRate(), halt=lambda: None)
+        self.link = types.SimpleNamespace(clock=motion.ClockRate(), halt=self.halt)
 
-    def pose(self):
+    async def halt(self):
+        pass
+
+    async def pose(self):
+        await asyncio.sleep(0)
         return self._pose
 
-    def send(self, linear, angular):
+    async def send(self, linear, angular):
         self.sent.append((linear, angular))
 
     def check(self):
@@ -385,11 +391,13 @@ def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_it
     monkeypatch.setattr(traffic_fleet, "is_busy", lambda robot_id: robot_id == a.pk)
     request = {"for": a.pk, "r": traffic_fleet.reach(a), "route": [[-4.0, -2.0], [4.0, -2.0]]}
     aside, home = StandingSession(b, (0.0, -1.0, 0.0)), (0.0, -2.0)
-    assert make_way.until_passed(aside, request, home) >= 1.0  # a waits to plan again: not passed, b stays
+    assert (
+        asyncio.run(make_way.until_passed(aside, request, home)) >= 1.0
+    )  # a waits to plan again: not passed, b stays
     redis = coordination.connection()
     traffic_state.write(redis, "waits", a.pk, {"for": b.pk, "expires": 1e12})
     # a waits for b where b stands aside: b goes back
-    assert make_way.until_passed(aside, request, home) < 0.5
+    assert asyncio.run(make_way.until_passed(aside, request, home)) < 0.5
     redis.hdel(traffic_state.key("waits"), str(a.pk))
     cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": 0.0, "y": -1.0, "yaw": 0.0}, 60)
     traffic.plan(a, (-2.0, -2.0), (2.0, -2.0), 0.3)  # a's plan passes b's home, where b stood
@@ -398,11 +406,11 @@ def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_it
     # a is held up: its plan's times are past
     traffic_state.write(redis, "plans", a.pk, {**entry, "cells": late})
     assert traffic.claim(a, (-2.0, -2.0), (-1.8, -2.0)) is None  # and it is still west of b's home
-    assert make_way.until_passed(aside, request, home) >= 1.0
+    assert asyncio.run(make_way.until_passed(aside, request, home)) >= 1.0
     traffic_state.release(a, None)
     assert traffic.claim(a, (1.6, -2.0), (2.0, -2.0)) is None  # east of it, on the same plan: passed
     traffic_state.write(redis, "plans", a.pk, {**entry, "cells": late})
-    assert make_way.until_passed(aside, request, home) < 0.5
+    assert asyncio.run(make_way.until_passed(aside, request, home)) < 0.5
 
 
 def test_a_stalled_robot_backs_off_only_into_room_it_has_claimed(robots):
@@ -412,10 +420,10 @@ def test_a_stalled_robot_backs_off_only_into_room_it_has_claimed(robots):
     limits = motion.Limits(linear=0.5, angular=1.0)
     cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": -2.45, "y": 0.0, "yaw": 0.0}, 60)
     blocked = StandingSession(a, (-2.0, 0.0, 0.0))  # heading east, b right behind it
-    back_off(blocked, limits)
+    asyncio.run(back_off(blocked, limits))
     assert blocked.sent == []
     free = StandingSession(a, (-2.0, 0.0, math.pi))  # heading west, b ahead of it: nobody behind
-    back_off(free, limits)
+    asyncio.run(back_off(free, limits))
     assert free.sent and all(linear < 0 for linear, _ in free.sent)
 
 
@@ -464,10 +472,10 @@ def test_a_parked_robot_a_trip_went_round_and_still_finds_in_its_way_is_asked_to
         [(2.0, -2.0)],
     )
     with pytest.raises(traffic.Reroute) as caught:  # first: round it
-        traffic.wait_for(session, *stretch, None, ahead)
+        asyncio.run(traffic.wait_for(session, *stretch, None, ahead))
     assert caught.value.around == {b.pk} and not caught.value.gave_way and sent == []
     with pytest.raises(StepFailed, match="to make way"):  # gone round it already: asked, waited for
-        traffic.wait_for(session, *stretch, None, ahead, gone_round=frozenset({b.pk}))
+        asyncio.run(traffic.wait_for(session, *stretch, None, ahead, gone_round=frozenset({b.pk})))
     assert sent == [(a.pk, b.pk)]
     request = traffic_state.read(redis, "makeway")[b.pk]
     assert request["for"] == a.pk and request["route"] == [[-2.0, -2.0], [2.0, -2.0]]

@@ -81,7 +81,9 @@ def test_with_redis_url_set_no_embedded_redis_runs(tmp_path):
 
 def test_every_process_is_restarted_with_backoff_and_reads_its_ports_from_the_setup(tmp_path):
     programs_by_name = {p.name: p for p in _parsed(tmp_path, _setup(tmp_path))["fleet"].process_configs}
-    assert set(programs_by_name) == {"web", "worker", "control", "sim", "links", "scheduler", "hangwatch"}
+    assert set(programs_by_name) == {
+        *("web", "executor-1", "worker", "control", "sim", "links", "scheduler", "hangwatch")
+    }
     for program in programs_by_name.values():
         assert program.autorestart and program.startretries == START_RETRIES
         assert program.stdout_logfile == str(tmp_path / "log" / f"{program.name}.log")
@@ -90,7 +92,15 @@ def test_every_process_is_restarted_with_backoff_and_reads_its_ports_from_the_se
         assert f"procwrap.py --parent-pidfile {tmp_path / 'supervisord.pid'}" in program.command
     for name in ("links", "scheduler", "hangwatch"):  # one per var folder, always
         assert f"--lock {tmp_path / 'proc' / name}.lock" in programs_by_name[name].command
-    for name in ("web", "worker", "control", "sim", "links", "scheduler"):  # watched by their heartbeat
+    for name in (
+        "web",
+        "executor-1",
+        "worker",
+        "control",
+        "sim",
+        "links",
+        "scheduler",
+    ):  # watched by their heartbeat
         assert programs_by_name[name].environment == {
             "FLEET_HEARTBEAT": str(tmp_path / "proc" / f"{name}.beat")
         }
@@ -106,6 +116,13 @@ def test_the_setup_comes_from_the_environment(tmp_path):
     setup = Setup.from_env(environ)
     assert (setup.port, setup.sim_port_base, setup.var_dir, setup.redis_url) == (8400, 9500, tmp_path, None)
     assert setup.env()["REDIS_URL"] == f"unix://{tmp_path / 'redis.sock'}"
+
+
+def test_the_robots_are_spread_over_as_many_executors_as_asked(tmp_path):
+    setup = Setup.from_env({"FLEET_VAR_DIR": str(tmp_path), "FLEET_EXECUTORS": "3"})
+    executors = [program for program in programs(setup) if program.name.startswith("executor-")]
+    assert [program.name for program in executors] == ["executor-1", "executor-2", "executor-3"]
+    assert all(program.command[-2:] == ["manage.py", "executor"] for program in executors)
 
 
 def test_the_terminal_hears_of_a_death_and_of_giving_up_but_not_of_every_start():
@@ -155,7 +172,10 @@ def test_the_relay_prints_only_new_lines_with_the_name_and_follows_a_rotation(tm
 
 # ----- production: deploy/ has one unit and one supervisord program per role -----
 
-ROLES = {"web", "worker", "control", "links", "scheduler", "sim"}
+ROLES = {"web", "executor", "worker", "control", "links", "scheduler", "sim"}
+UNITS = {role: f"fleet-{role}.service" for role in ROLES} | {
+    "executor": "fleet-executor@.service"
+}  # @1, @2...
 
 
 def _ini(path) -> configparser.ConfigParser:
@@ -166,12 +186,13 @@ def _ini(path) -> configparser.ConfigParser:
 
 
 def test_every_role_has_a_systemd_unit_that_always_restarts_it():
-    for role in ROLES:
-        service = _ini(BASE_DIR / "deploy" / "systemd" / f"fleet-{role}.service")["Service"]
+    for role, unit in UNITS.items():
+        service = _ini(BASE_DIR / "deploy" / "systemd" / unit)["Service"]
         assert service["Restart"] == "always" and float(service["RestartSec"]) > 0, role
         assert service["ExecStart"].startswith("/opt/fleet/.venv/bin/python "), role
     target = _ini(BASE_DIR / "deploy" / "systemd" / "fleet.target")["Unit"]["Wants"].split()
-    assert set(target) == {f"fleet-{role}.service" for role in ROLES - {"sim"}}  # the simulator: on request
+    wanted = {UNITS[role].replace("@.", "@1.") for role in ROLES - {"sim"}}  # the simulator: on request
+    assert set(target) == wanted
 
 
 def test_the_single_host_supervisord_config_restarts_every_role():

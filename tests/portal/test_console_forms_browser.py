@@ -12,7 +12,7 @@ pytestmark = [pytest.mark.browser, pytest.mark.timeout(90), pytest.mark.usefixtu
 @pytest.fixture
 def no_runner(monkeypatch):
     """Instructions are stored and dispatched; nothing starts running them."""
-    monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)
+    monkeypatch.setattr(dispatch.executor, "wake", lambda robot_ids: None)
 
 
 def type_instruction(page, text):

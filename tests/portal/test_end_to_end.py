@@ -18,7 +18,9 @@ NEAR_A = (
 )
 
 
-def test_register_instruct_watch_answer_and_stop(seeded_terms, login, fleet_admin, live_url, eager_celery):
+def test_register_instruct_watch_answer_and_stop(
+    seeded_terms, login, fleet_admin, live_url, eager_celery, executor
+):
     with demo_world() as world:
         page = login(fleet_admin)
         page.goto(f"{live_url}/register/")

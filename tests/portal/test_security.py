@@ -279,7 +279,7 @@ def test_a_goal_dragged_on_the_map_keeps_its_heading(client_for, operator, fleet
     from execution import dispatch
     from execution.models import Instruction
 
-    monkeypatch.setattr(dispatch, "launch", lambda task, pk: None)  # stored, not run
+    monkeypatch.setattr(dispatch.executor, "wake", lambda robot_ids: None)  # stored, not run
     body = {"robot_ids": [fleet["turtlebot"].pk], "destination": {"x": 0.5, "y": 0.4, "yaw": 1.57}}
     reply = client_for(operator).post("/api/instructions", body, content_type="application/json")
     assert reply.status_code == 201, reply.content

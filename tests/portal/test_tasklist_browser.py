@@ -41,10 +41,13 @@ def free_of_slots():
 
 
 @pytest.fixture
-def runs_in_threads(settings, eager_celery):
-    """Each robot's executor in a thread of the server, as a worker would run it: the page's socket answers at once
-    (an eager task would hold its answer until husky arrived), so a second instruction can queue behind the first."""
-    settings.FLEET_EXECUTE = "thread"
+def runs_in_threads(settings, eager_celery, transactional_db):
+    """The executor on a loop of the test process, as its own process would run it: the page's socket answers at
+    once, so a second instruction can queue behind the first."""
+    from execution import executor
+
+    with executor.in_thread() as running:
+        yield running
 
 
 def csv_rows(text: str) -> dict[int, dict]:

@@ -147,7 +147,7 @@ def test_a_robot_held_by_someone_else_disables_the_pad_with_one_message(
 
 
 def test_a_goal_dragged_on_the_map_sends_the_robot_there_facing_the_drag(
-    seeded_terms, login, operator, live_url, fleet_admin, eager_celery
+    seeded_terms, login, operator, live_url, fleet_admin, eager_celery, executor
 ):
     with registered_world(fleet_admin, keys=("turtlebot",)) as world:
         x0, y0, _ = world.pose("turtlebot")

@@ -9,7 +9,7 @@ import pytest
 from recordings import recorder
 from recordings.mcapfile import read_messages
 from robots.rosbridge import RosbridgeClient
-from tests.execution.conftest import exec_settings, turtle_world  # noqa: F401 (fixtures)
+from tests.execution.conftest import turtle_sim, turtle_world  # noqa: F401 (fixtures)
 from tests.portal.demo import pose_stream
 
 pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]

@@ -1,0 +1,222 @@
+"""What an executor process's robots read from and keep in Redis, in one round trip per tick for all of them.
+
+Each robot the process runs holds its lock through a Lease. Every TICK_S the board sends one pipeline: each
+lease's stop, preempt and cancel flags (a robot's session reads them from its lease, with no I/O, before every
+command) and, every HEARTBEAT_S, the renewal of each lease whose command loop beat within LIVELY_S. The robots'
+poses, kept now and then for the fleet (robots.poses), leave in one batch per tick too. So a driven robot
+costs its process no Redis call of its own per control tick, and no thread: the board is one task on the
+executor's loop.
+
+What a lease says, as the threaded heartbeat said before it (execution.coordination):
+- `held`: the lock was confirmed within its time to live and never refused. A killed or frozen process renews
+  nothing, so its locks lapse within LOCK_TTL_MS and the watchdog stops its robots; a command loop that hangs
+  in a live process stops beating, and LIVELY_S later its lease is no longer renewed, with the same result.
+- `error`: the last read failed (Redis away, or refusing writes): no stop can be seen, so the session stops
+  its robot at once with the reason.
+- `flags`: (time of the robot's last stop, the preempting execution, the watched execution's cancel words),
+  as of the last read, at most TICK_S old. A stop's own zeros leave before its flags (execution.fast_stop), and
+  a session that sees the flag ends with a zero of its own, so the robot ends at rest either way.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+
+import redis.asyncio
+from django.conf import settings
+from redis.exceptions import RedisError, ResponseError
+
+from execution import blocking
+from execution.coordination import HEARTBEAT_S, LIVELY_S, RENEW, RobotLock, key
+from fleetcore import faults
+from robots import poses as pose_store
+
+TICK_S = 0.05  # between the board's round trips: a flag is seen this late at most (odometry comes at 20 Hz)
+REDIS_TIMEOUT_S = 0.5  # one round trip; a Redis that does not answer is an error for every lease at once
+
+log = logging.getLogger(__name__)
+
+
+class Lease:
+    """A robot lock this process holds, kept by its board (renewed while the command loop beats)."""
+
+    def __init__(self, lock: RobotLock, lively: float = LIVELY_S) -> None:
+        self.lock, self.lively = lock, lively
+        self.renewed = self.alive_until = time.monotonic()
+        self.next_renewal = 0.0
+        self.lost = self.quiet = False
+        self.fault: str | None = None  # why Redis refused a renewal's write (a full disk), in words
+        self.error: RedisError | None = None  # the last read's failure, until a read succeeds
+        self.watched: int | None = None  # the execution whose cancel flag is read
+        self.flags: tuple[float, int | None, str | None] = (0.0, None, None)
+        self.pose: tuple | None = None  # to keep for the fleet with the next tick
+        self._read = asyncio.Event()
+        self.beat()
+
+    @property
+    def token(self) -> str:
+        return self.lock.token
+
+    def beat(self) -> None:
+        """The command loop is alive: keep renewing for another LIVELY_S."""
+        self.alive_until = time.monotonic() + self.lively
+
+    @property
+    def held(self) -> bool:
+        """Whether the lock is still ours: never refused, and confirmed within its time to live."""
+        return not self.lost and time.monotonic() - self.renewed < self.lock.ttl_ms / 1000
+
+    @property
+    def why_lost(self) -> str:
+        """Why the lock is not ours, in a person's words (for the execution's outcome)."""
+        if self.fault:
+            return f"{self.fault}, so its lock on the robot could not be kept"
+        if self.lost:
+            return "its lock on the robot lapsed before it was renewed (it is not ours any more)"
+        if self.quiet:
+            return f"its command loop did not run for {self.lively:g} s, so its lock on the robot lapsed"
+        return f"its lock on the robot was not renewed for {self.lock.ttl_ms / 1000:g} s (a starved process?)"
+
+    def watch(self, execution_id: int) -> None:
+        """Read this execution's cancel flag from now on (the execution the robot runs)."""
+        self.watched, self.flags = execution_id, (self.flags[0], self.flags[1], None)
+
+    def keep_pose(self, pose) -> None:
+        self.pose = pose
+
+    async def fresh(self, timeout: float = 2.0) -> None:
+        """Wait for the board's next read (flags as of now, not as of before this call)."""
+        self._read.clear()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._read.wait(), timeout)
+
+    def _took(self, renewed, values, now: float) -> None:
+        """The answers of one round trip: the renewal's (None when not sent) and the flags."""
+        if renewed is not None:
+            if isinstance(renewed, ResponseError):
+                self.fault = faults.refusal(renewed) or str(renewed)
+                self.lost = True
+            elif renewed:
+                self.renewed = now
+            else:
+                self.lost = True
+        stop, preempt, cancel = values
+        self.flags = (float(stop) if stop else 0.0, int(preempt) if preempt else None,
+                      cancel.decode() if cancel else None)  # fmt: skip
+        self.error = None
+        self._read.set()
+
+    def _failed(self, exc: RedisError) -> None:
+        self.error = exc
+        self._read.set()
+
+
+class Board:
+    """The process's one Redis round trip per tick for all its leases (see the module's docstring)."""
+
+    def __init__(self, tick: float = TICK_S, every: float = HEARTBEAT_S) -> None:
+        self.tick, self.every = tick, every
+        self.leases: set[Lease] = set()
+        self._client: redis.asyncio.Redis | None = None
+        self._storing: asyncio.Future | None = None
+
+    def lease(self, lock: RobotLock, lively: float = LIVELY_S) -> Lease:
+        """Keep this acquired lock from now on (renewed while its command loop beats)."""
+        lease = Lease(lock, lively)
+        self.leases.add(lease)
+        return lease
+
+    def drop(self, lease: Lease) -> None:
+        self.leases.discard(lease)
+
+    async def run(self) -> None:
+        """Tick until cancelled."""
+        try:
+            while True:
+                started = time.monotonic()
+                await self.once()
+                await asyncio.sleep(max(0.0, self.tick - (time.monotonic() - started)))
+        finally:
+            if self._client is not None:
+                with contextlib.suppress(Exception):  # closing a link to a Redis that is away
+                    await self._client.aclose()
+
+    async def once(self) -> None:
+        """One round trip: renewals due, every lease's flags; then the poses kept since the last tick."""
+        leases = list(self.leases)
+        if not leases:
+            return
+        now = time.monotonic()
+        pipe = self._redis().pipeline(transaction=False)
+        renewing = []
+        for lease in leases:
+            lease.quiet = now > lease.alive_until
+            due = not lease.quiet and not lease.lost and now >= lease.next_renewal
+            if due:
+                lease.next_renewal = now + self.every
+                pipe.eval(RENEW, 1, lease.lock.key, lease.token, lease.lock.ttl_ms)
+            renewing.append(due)
+            robot = lease.lock.robot_id
+            cancel = key("cancel", lease.watched) if lease.watched is not None else key("cancel", "none")
+            pipe.mget(key("stop", robot), key("preempt", robot), cancel)
+        try:
+            answers = await asyncio.wait_for(pipe.execute(raise_on_error=False), REDIS_TIMEOUT_S * 2)
+        except (RedisError, OSError, TimeoutError) as exc:
+            error = exc if isinstance(exc, RedisError) else RedisError(f"no answer from Redis ({exc})")
+            for lease in leases:
+                lease._failed(error)
+            return
+        answers = iter(answers)
+        for lease, due in zip(leases, renewing, strict=True):
+            renewed = next(answers) if due else None
+            values = next(answers)
+            if isinstance(values, Exception):
+                lease._failed(values if isinstance(values, RedisError) else RedisError(str(values)))
+                continue
+            lease._took(renewed, values, now)
+        self._store_poses(leases)
+
+    def _store_poses(self, leases: list[Lease]) -> None:
+        """The poses kept since the last tick, in one batch off the loop (one batch in flight at a time)."""
+        if self._storing is not None and not self._storing.done():
+            return
+        batch = []
+        for lease in leases:
+            if lease.pose is not None:
+                x, y, yaw = lease.pose
+                batch.append({"id": lease.lock.robot_id, "x": round(x, 3), "y": round(y, 3), "yaw": round(yaw, 4),
+                              "t": time.time()})  # fmt: skip
+                lease.pose = None
+        if batch:
+            self._storing = asyncio.ensure_future(_store(batch))
+
+    def _redis(self) -> redis.asyncio.Redis:
+        if self._client is None:
+            self._client = redis.asyncio.Redis.from_url(
+                settings.REDIS_URL, socket_timeout=REDIS_TIMEOUT_S, socket_connect_timeout=REDIS_TIMEOUT_S
+            )
+        return self._client
+
+
+async def _store(batch: list[dict]) -> None:
+    try:
+        await blocking.call(pose_store.store_poses, batch)
+    except Exception:  # the cache is away: the pose hub (or the next tick) keeps them later
+        log.warning("executor: %d poses could not be kept", len(batch), exc_info=True)
+
+
+_boards: dict[asyncio.AbstractEventLoop, Board] = {}
+
+
+def of_loop() -> Board:
+    """The running loop's board, started on first use (one per executor process: one loop)."""
+    loop = asyncio.get_running_loop()
+    board = _boards.get(loop)
+    if board is None:
+        board = _boards[loop] = Board()
+        task = loop.create_task(board.run(), name="executor board")
+        task.add_done_callback(lambda _: _boards.pop(loop, None))
+    return board

@@ -1,0 +1,150 @@
+"""The executor's board: a robot's lock renewed while its command loop beats and lapsed when it does not, and
+the flags every session reads from its lease, all in one Redis round trip per tick for the process."""
+
+import asyncio
+import time
+import uuid
+
+import pytest
+import redis
+
+from execution import coordination
+from execution.board import Board
+
+
+@pytest.fixture
+def lock(settings):
+    settings.FLEET_EXEC_KEY_PREFIX = f"test:board:{uuid.uuid4().hex[:8]}"
+    lock = coordination.RobotLock(1, ttl_ms=400)
+    assert lock.acquire()
+    yield lock
+    lock.release()
+
+
+def on_board(body, tick: float = 0.02, every: float = 0.05):
+    """Run body(board) on a fresh loop with the board ticking beside it."""
+
+    async def main():
+        board = Board(tick=tick, every=every)
+        ticking = asyncio.ensure_future(board.run())
+        try:
+            return await body(board)
+        finally:
+            ticking.cancel()
+
+    return asyncio.run(main())
+
+
+def test_a_beating_command_loop_keeps_the_lock_past_its_time_to_live(lock):
+    async def body(board):
+        lease = board.lease(lock, lively=1.0)
+        for _ in range(16):  # 0.8 s: twice the lock's time to live
+            lease.beat()
+            await asyncio.sleep(0.05)
+        return lease.held
+
+    assert on_board(body)
+    assert coordination.lock_holders([1])[1] == lock.token
+
+
+def test_a_hung_command_loop_lets_the_lock_lapse_for_the_watchdog(lock):
+    async def body(board):
+        lease = board.lease(lock, lively=0.1)
+        await asyncio.sleep(
+            0.8
+        )  # no beat: after 0.1 s the board stops renewing, 0.4 s later the lock is gone
+        return lease
+
+    lease = on_board(body)
+    assert coordination.lock_holders([1])[1] is None
+    assert not lease.held and lease.quiet  # the loop, if it ever wakes, sends nothing more
+    assert "did not run for 0.1 s" in lease.why_lost
+
+
+def test_a_lock_taken_by_another_is_lost_for_good(lock):
+    async def body(board):
+        lease = board.lease(lock, lively=5.0)
+        coordination.connection().set(lock.key, "someone-else")
+        await asyncio.sleep(0.2)
+        return lease
+
+    lease = on_board(body)
+    assert lease.lost and not lease.held
+
+
+def test_the_flags_of_every_lease_come_in_one_round_trip_per_tick(lock, monkeypatch):
+    other = coordination.RobotLock(2, ttl_ms=400)
+    assert other.acquire()
+    sent = []
+
+    async def body(board):
+        first, second = board.lease(lock), board.lease(other)
+        second.watch(77)
+        real = board._redis().pipeline
+
+        def counting(*args, **kwargs):
+            sent.append(time.monotonic())
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(board._redis(), "pipeline", counting)
+        stopped = coordination.request_stop([1])
+        coordination.request_cancel([77], "cancelled by ada")
+        sent.clear()
+        await first.fresh()
+        await first.fresh()
+        return stopped, first.flags, second.flags, len(sent)
+
+    try:
+        stopped, first, second, trips = on_board(body)
+    finally:
+        other.release()
+    assert first[0] == pytest.approx(stopped) and first[2] is None
+    assert second == (0.0, None, "cancelled by ada")
+    assert 1 <= trips <= 3  # two ticks for two leases: one pipeline a tick, not one call per robot
+
+
+def test_redis_lost_under_a_command_loop_fails_the_step_as_executor_lost(lock, monkeypatch):
+    """No stop flag, preemption or lock can be seen without Redis: the step ends (its robot is then halted by
+    the runner) with a reason a person reads, not a connection error's."""
+    from types import SimpleNamespace
+
+    from execution import handlers
+    from execution.handlers import run_step
+    from execution.steps import REDIS_LOST, Interrupted, Session
+
+    def unreachable(*_args):
+        raise redis.ConnectionError("Error 111 connecting to redis.sock. Connection refused.")
+
+    async def body(board):
+        lease = board.lease(lock)
+        await lease.fresh()
+        monkeypatch.setattr(board, "_redis", lambda: SimpleNamespace(pipeline=lambda **_: _Broken()))
+        await lease.fresh()
+        link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=SimpleNamespace(value=None))
+        session = Session(SimpleNamespace(pk=1), link, lease)
+        with pytest.raises(Interrupted) as failure:
+            session.check()
+        assert failure.value.outcome == "failed" and failure.value.reason.startswith(REDIS_LOST)
+
+        async def go_to(*_args):
+            unreachable()
+
+        # a Redis error from anywhere in a step's handler (e.g. releasing its route) says the same
+        monkeypatch.setitem(handlers.HANDLERS, "go_to", go_to)
+        with pytest.raises(Interrupted) as failure:
+            await run_step(
+                session, {"action": "move", "robots": ["tb"], "destination": {"name": "X", "x": 1, "y": 0}}
+            )
+        assert failure.value.reason.startswith(REDIS_LOST)
+
+    on_board(body)
+
+
+class _Broken:
+    """A pipeline to a Redis that is gone."""
+
+    def __getattr__(self, _name):
+        return lambda *args, **kwargs: None
+
+    async def execute(self, **_kwargs):
+        raise redis.ConnectionError("Error 111 connecting to redis.sock. Connection refused.")
