@@ -14,8 +14,11 @@ What a lease says, as the threaded heartbeat said before it (execution.coordinat
 - `error`: the last read failed (Redis away, or refusing writes): no stop can be seen, so the session stops
   its robot at once with the reason.
 - `flags`: (time of the robot's last stop, the preempting execution, the watched execution's cancel words),
-  as of the last read, at most TICK_S old. A stop's own zeros leave before its flags (execution.fast_stop), and
-  a session that sees the flag ends with a zero of its own, so the robot ends at rest either way.
+  as of the last read. Whoever raises a flag also publishes on coordination's `flags` channel, which the board
+  listens to: it reads at once, so a stop is seen one round trip after its flag, not up to TICK_S later (a
+  robot under way could otherwise take a command after the stop's zero). TICK_S bounds it when a message is
+  lost. A stop's own zeros leave before its flags (execution.fast_stop), and a session that sees the flag ends
+  with a zero of its own, so the robot ends at rest either way.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from robots import poses as pose_store
 
 TICK_S = 0.05  # between the board's round trips: a flag is seen this late at most (odometry comes at 20 Hz)
 REDIS_TIMEOUT_S = 0.5  # one round trip; a Redis that does not answer is an error for every lease at once
+LISTEN_RETRY_S = 1.0  # the flags channel's subscription, lost, is made again after this
 
 log = logging.getLogger(__name__)
 
@@ -122,6 +126,7 @@ class Board:
         self.leases: set[Lease] = set()
         self._client: redis.asyncio.Redis | None = None
         self._storing: asyncio.Future | None = None
+        self._nudged = asyncio.Event()  # a flag was raised somewhere: read now
 
     def lease(self, lock: RobotLock, lively: float = LIVELY_S) -> Lease:
         """Keep this acquired lock from now on (renewed while its command loop beats)."""
@@ -133,13 +138,19 @@ class Board:
         self.leases.discard(lease)
 
     async def run(self) -> None:
-        """Tick until cancelled."""
+        """Tick until cancelled, at once when a flag is raised."""
+        listening = asyncio.ensure_future(self._listen())
         try:
             while True:
                 started = time.monotonic()
+                self._nudged.clear()
                 await self.once()
-                await asyncio.sleep(max(0.0, self.tick - (time.monotonic() - started)))
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(
+                        self._nudged.wait(), max(0.0, self.tick - (time.monotonic() - started))
+                    )
         finally:
+            listening.cancel()
             if self._client is not None:
                 with contextlib.suppress(Exception):  # closing a link to a Redis that is away
                     await self._client.aclose()
@@ -178,6 +189,20 @@ class Board:
                 continue
             lease._took(renewed, values, now)
         self._store_poses(leases)
+
+    async def _listen(self) -> None:
+        """Nudge the loop on every message of the flags channel; a lost subscription is made again (the ticks
+        go on meanwhile)."""
+        while True:
+            try:
+                async with self._redis().pubsub() as pubsub:
+                    await pubsub.subscribe(key("flags"))
+                    while True:
+                        message = await pubsub.get_message(ignore_subscribe_messages=True, timeout=None)
+                        if message is not None:
+                            self._nudged.set()
+            except (RedisError, OSError):  # Redis away: the ticks see it too; subscribe again later
+                await asyncio.sleep(LISTEN_RETRY_S)
 
     def _store_poses(self, leases: list[Lease]) -> None:
         """The poses kept since the last tick, in one batch off the loop (one batch in flight at a time)."""

@@ -8,6 +8,8 @@
 - A stop flag holds the time of the last stop of a robot; a runner stops when it is newer than its start.
 - A preempt flag names the Execution that interrupts the robot's current one.
 - A cancel flag holds who cancelled one Execution (one instruction cancelled); its runner stops it.
+- Raising any of these flags also publishes on the `flags` channel: each executor's board reads its robots'
+  flags at once (execution/board.py), not at its next tick.
 
 Keys live under FLEET_EXEC_KEY_PREFIX, so test runs sharing one Redis do not meet.
 """
@@ -119,6 +121,7 @@ def request_stop(robot_ids) -> float:
     pipe = stop_connection().pipeline(transaction=False)
     for robot_id in robot_ids:
         pipe.set(key("stop", robot_id), repr(now), ex=STOP_FLAG_TTL_S)
+    pipe.publish(key("flags"), "stop")
     pipe.execute()
     return now
 
@@ -145,6 +148,7 @@ async def arequest_stop(robot_ids) -> float:
         async with client.pipeline(transaction=False) as pipe:
             for robot_id in robot_ids:
                 pipe.set(key("stop", robot_id), repr(now), ex=STOP_FLAG_TTL_S)
+            pipe.publish(key("flags"), "stop")
             await pipe.execute()
 
     await asyncio.wait_for(flags(), STOP_REDIS_TIMEOUT_S * 2)
@@ -152,7 +156,10 @@ async def arequest_stop(robot_ids) -> float:
 
 
 def request_preempt(robot_id: int, execution_id: int) -> None:
-    connection().set(key("preempt", robot_id), execution_id, ex=STOP_FLAG_TTL_S)
+    pipe = connection().pipeline(transaction=False)
+    pipe.set(key("preempt", robot_id), execution_id, ex=STOP_FLAG_TTL_S)
+    pipe.publish(key("flags"), "preempt")
+    pipe.execute()
 
 
 def clear_preempt(robot_id: int, execution_id: int | None = None) -> None:
@@ -195,6 +202,7 @@ def request_cancel(execution_ids, words: str) -> None:
     pipe = connection().pipeline(transaction=False)
     for execution_id in execution_ids:
         pipe.set(key("cancel", execution_id), words, ex=STOP_FLAG_TTL_S)
+    pipe.publish(key("flags"), "cancel")
     pipe.execute()
 
 

@@ -164,7 +164,6 @@ class Executor:
             settings.REDIS_URL,
             socket_timeout=REDIS_TIMEOUT_S,
             socket_connect_timeout=REDIS_TIMEOUT_S,
-            socket_keepalive=True,
             retry=Retry(NoBackoff(), 0),  # the loops retry, with their backoff
         )
         database = ThreadPoolExecutor(max_workers=1, thread_name_prefix="executor database")

@@ -104,6 +104,7 @@ async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
         link = await blocking.call(_link_of, execution)
         await link.open()
         session = Session(execution, link, lease)
+        await lease.fresh()  # its cancel flag read before anything moves (a cancel that came while it queued)
         for index in range(execution.step_index, len(execution.steps)):
             words.append(await run_step(session, execution.steps[index]))
             await blocking.call(advance, execution, index + 1)

@@ -9,12 +9,13 @@ def test_model_splits_each_cost_by_what_pays_for_it():
         "links": 0.1,
         "scheduler": 0.05,
         "web": 0.01,
+        "executor": 0.0,
         "worker": 0.0,
         "control": 0.0,
         "redis": 0.01,
     }
     clients = {**base, "web": 0.21}  # 10 clients of 100 robots: 0.2 cores more
-    driven = {**base, "worker": 0.2, "sim": 0.25, "redis": 0.02}  # 10 driven robots
+    driven = {**base, "executor": 0.2, "sim": 0.25, "redis": 0.02}  # 10 driven robots
     cfg = {"clients": 10, "driven": 10}
     got = model({"base": base, "clients": clients, "driven": driven}, cfg, 100)
     ms = got["ms_per_s"]

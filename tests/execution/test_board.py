@@ -148,3 +148,20 @@ class _Broken:
 
     async def execute(self, **_kwargs):
         raise redis.ConnectionError("Error 111 connecting to redis.sock. Connection refused.")
+
+
+def test_a_stop_flag_is_read_at_once_not_at_the_next_tick(lock):
+    """Raising a flag publishes on the flags channel: the board reads then, so a robot under way takes no
+    command after a stop for want of a tick (here the ticks are 10 s apart)."""
+
+    async def body(board):
+        lease = board.lease(lock)
+        await asyncio.sleep(0.3)  # the first tick done, the flags channel subscribed
+        raised = coordination.request_stop([1])
+        started = time.monotonic()
+        while lease.flags[0] != raised and time.monotonic() - started < 5.0:
+            await asyncio.sleep(0.005)
+        return lease.flags[0] == raised, time.monotonic() - started
+
+    seen, after = on_board(body, tick=10.0, every=10.0)
+    assert seen and after < 5.0  # bounded; far under the 10 s tick
