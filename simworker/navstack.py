@@ -305,6 +305,9 @@ class Nav2(NavStack):
             uuid = _uuid_bytes((info.get("goal_id") or {}).get("uuid"))
             goal = self.goal if self.goal is not None and self.goal.action == name else None
             if goal is None or (any(uuid) and uuid != goal.uuid):
+                self.cancels.append(
+                    (name, "service")
+                )  # asked, with nothing to cancel (a client's cancel came first)
                 return {"return_code": 2 if any(uuid) else 1, "goals_canceling": []}  # unknown id; rejected
             self._cancel(goal, "service")
             return {"return_code": 0, "goals_canceling": [goal.info(self.robot.graph)]}
