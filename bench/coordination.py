@@ -63,7 +63,8 @@ from fleetcore.world import load_world
 from simworker.testing import WorldProcess
 
 RESULT_FILE = "coordination.json"
-EXECUTORS = 2  # executor processes (--executors): one per core of this machine
+EXECUTORS = 4  # executor processes (--executors): with 2 (16 robots each) one process's loop starved past its
+# locks' time to live under 8 blocking threads planning at once, and its 16 robots failed "executor lost"
 EXECUTOR_START_TIMEOUT = 60.0  # s: every executor is a live member
 HOME_SETTLE_S = 0.5  # s: robots sent home publish their new odometry before their traffic is released
 SCRATCH_DB = "bench_coordination"  # on DATABASE_URL's PostgreSQL server
