@@ -1,6 +1,7 @@
 """The executor's way out of its event loop: the database, the traffic tables and the pushes to browsers are
-synchronous (the Django ORM, redis-py, Channels' async_to_sync), so a robot's task hands each such call to one
-small pool of threads shared by every robot of the loop, and the loop goes on ticking the others meanwhile.
+synchronous (the Django ORM, redis-py), so a robot's task hands each such call to one small pool of threads
+shared by every robot of the loop, and the loop goes on ticking the others meanwhile. A push to browsers made in
+one of these threads is handed back to the loop (live.deliver_on), which sends it on its own Redis connection.
 
 One pool per event loop (an executor process has one), never a thread per robot: POOL_THREADS calls at a time,
 the rest queue. A database that holds a call for seconds (locked, restarting) holds that robot's step, not the
@@ -19,6 +20,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 from django.db import connections
 
+import live
+
 POOL_THREADS = 8  # blocking calls of one executor at a time (32 robots planning at once queue here)
 CLOSE_WAIT_S = 5.0  # close(): each thread gets this long to close its connections
 
@@ -29,7 +32,12 @@ def _pool() -> ThreadPoolExecutor:
     loop = asyncio.get_running_loop()
     pool = _pools.get(loop)
     if pool is None:
-        pool = _pools[loop] = ThreadPoolExecutor(POOL_THREADS, thread_name_prefix="executor-blocking")
+        pool = _pools[loop] = ThreadPoolExecutor(
+            POOL_THREADS,
+            thread_name_prefix="executor-blocking",
+            initializer=live.deliver_on,
+            initargs=(loop,),
+        )
     return pool
 
 

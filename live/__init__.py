@@ -5,7 +5,9 @@ and forward; the handler name in the consumer matches the payload's "type".
 """
 
 import asyncio
+import contextlib
 import logging
+import threading
 import time
 from typing import NotRequired, TypedDict
 
@@ -85,6 +87,17 @@ class AlertUpdate(TypedDict):
 SEND_TIMEOUT_S = 0.5  # a push waits this long at most for Redis (the channel layer)
 QUIET_S = 2.0  # after a push failed, the next ones are skipped this long: a frozen Redis costs one wait
 _quiet_until = 0.0
+_home = threading.local()  # .loop: the event loop this thread's pushes are handed to (deliver_on)
+_delivering: set[asyncio.Future] = set()  # handed-over pushes under way (a task needs a strong reference)
+
+
+def deliver_on(loop: asyncio.AbstractEventLoop) -> None:
+    """Hand this thread's pushes to `loop` (a thread of the executor's blocking pool: its loop's own).
+
+    Without it a push from a plain thread goes through async_to_sync, which runs a new event loop on a new
+    thread each time, and the channel layer opens a new Redis connection for that loop: a few milliseconds of
+    CPU per push, where the loop's own connection costs a send. Handed over, a push does not wait for Redis."""
+    _home.loop = loop
 
 
 def send(group: str, payload: dict) -> None:
@@ -93,19 +106,39 @@ def send(group: str, payload: dict) -> None:
     A push is best effort: Redis frozen, away or refusing writes is logged and the push lost (pages catch up
     from their next snapshot), so what pushed it (a stop's answer above all) goes on within SEND_TIMEOUT_S.
     """
-    global _quiet_until
     layer = get_channel_layer()
     if layer is None or time.monotonic() < _quiet_until:
+        return
+    loop = getattr(_home, "loop", None)
+    if loop is not None and not loop.is_closed():
+        with contextlib.suppress(
+            RuntimeError
+        ):  # the loop closed meanwhile: the push is lost, as on a failure
+            future = asyncio.run_coroutine_threadsafe(_send_logged(layer, group, payload), loop)
+            _delivering.add(future)
+            future.add_done_callback(_delivering.discard)
         return
     try:
         async_to_sync(_send_bounded)(layer, group, payload)
     except Exception as exc:
-        _quiet_until = time.monotonic() + QUIET_S
-        log.warning("push to %s lost (Redis: %r); pushes paused %g s", group, exc, QUIET_S)
+        _lost(group, exc)
+
+
+def _lost(group: str, exc: Exception) -> None:
+    global _quiet_until
+    _quiet_until = time.monotonic() + QUIET_S
+    log.warning("push to %s lost (Redis: %r); pushes paused %g s", group, exc, QUIET_S)
 
 
 async def _send_bounded(layer, group: str, payload: dict) -> None:
     await asyncio.wait_for(layer.group_send(group, payload), SEND_TIMEOUT_S)
+
+
+async def _send_logged(layer, group: str, payload: dict) -> None:
+    try:
+        await _send_bounded(layer, group, payload)
+    except Exception as exc:
+        _lost(group, exc)
 
 
 def send_on_commit(group: str, payload: dict) -> None:
