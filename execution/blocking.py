@@ -3,10 +3,12 @@ synchronous (the Django ORM, redis-py), so a robot's task hands each such call t
 shared by every robot of the loop, and the loop goes on ticking the others meanwhile. A push to browsers made in
 one of these threads is handed back to the loop (live.deliver_on), which sends it on its own Redis connection.
 
-One pool per event loop (an executor process has one), never a thread per robot: POOL_THREADS calls at a time,
-the rest queue. A database that holds a call for seconds (locked, restarting) holds that robot's step, not the
-others' control ticks. Each thread keeps its database connection between calls (a connect per call would cost
-more than most queries); one the database dropped is made again. close() ends the pool with its connections.
+One pool per event loop (an executor process has one), never a thread per robot: POOL_THREADS calls at a time, the
+rest queue. (The executor's sweep and membership have a database thread of their own, so that finding waiting work
+never queues behind the robots' planning: execution/executor.py.) A database that holds a call for seconds
+(locked, restarting) holds that robot's step, not the others' control ticks. Each thread keeps its database
+connection between calls (a connect per call would cost more than most queries); one the database dropped is made
+again. close() ends the pool with its connections.
 """
 
 from __future__ import annotations

@@ -126,22 +126,34 @@ def request_stop(robot_ids) -> float:
     return now
 
 
-_ASYNC: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> {url: redis.asyncio client}
+_ASYNC: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # loop -> {(use, url): redis.asyncio client}
+
+
+def aconnection(stop: bool = False) -> redis.asyncio.Redis:
+    """This event loop's own Redis client (connection(), or with stop=True stop_connection(), for code on a
+    loop): one per loop, as a redis.asyncio client cannot move between loops."""
+    clients = _ASYNC.setdefault(asyncio.get_running_loop(), {})  # by URL: a loop outlives a test's settings
+    client = clients.get((stop, settings.REDIS_URL))
+    if client is None:
+        if stop:
+            limit = STOP_REDIS_TIMEOUT_S
+            options = {
+                "socket_timeout": limit,
+                "socket_connect_timeout": limit,
+                "retry": _no_retry(on_loop=True),
+            }
+        else:
+            options = {"socket_timeout": 5}
+        client = clients[(stop, settings.REDIS_URL)] = redis.asyncio.Redis.from_url(
+            settings.REDIS_URL, **options
+        )
+    return client
 
 
 async def arequest_stop(robot_ids) -> float:
     """request_stop for code on an event loop: the same flags, over this loop's own Redis connection (bounded by
     STOP_REDIS_TIMEOUT_S as a whole; TimeoutError or a redis error raise)."""
-    clients = _ASYNC.setdefault(asyncio.get_running_loop(), {})  # by URL: a loop outlives a test's settings
-    client = clients.get(settings.REDIS_URL)
-    if client is None:
-        limit = STOP_REDIS_TIMEOUT_S
-        client = clients[settings.REDIS_URL] = redis.asyncio.Redis.from_url(
-            settings.REDIS_URL,
-            socket_timeout=limit,
-            socket_connect_timeout=limit,
-            retry=_no_retry(on_loop=True),
-        )
+    client = aconnection(stop=True)
     now = time.time()
 
     async def flags() -> None:

@@ -61,8 +61,8 @@ async def travel(session: Session, goal, pace: Pace, nav: bool = False) -> tuple
             learned = await blocking.call(state.known_pace, robot.pk) if nav else None
             speed = pace.planned(nav, learned) * session.link.clock.rate  # m per second of wall time
             settled = replans > 0 and spot != tuple(goal)
-            path = await blocking.call(
-                traffic.plan, robot, pose[:2], spot, speed, around, session.check, settled, may_ask=True
+            path = await traffic.plan(
+                robot, pose[:2], spot, speed, around, session.check, settled, True, session.making_way
             )
             if path is None:  # it stands (for good, as the others plan) until a way opens
                 await blocking.call(state.drop_plan, robot)

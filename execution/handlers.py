@@ -18,7 +18,7 @@ from redis.exceptions import RedisError
 
 import alerts
 import live
-from execution import blocking, driving, traffic, traffic_state
+from execution import blocking, driving, traffic, traffic_fleet, traffic_state
 from execution.link import LinkError
 from execution.make_way import aside, until_passed
 from execution.models import Execution, Photo
@@ -96,13 +96,14 @@ async def make_way(session: Session, step: Step) -> str:
     request = await blocking.call(traffic_state.way_request, robot)
     if request is None:
         return "nobody is waiting for it to make way"
-    other = await blocking.call(traffic._name_of, request["for"])
+    other = await blocking.call(traffic_fleet.name_of, request["for"])
     try:
         home = (await session.pose())[:2]
         spot = await blocking.call(aside, robot, home, request)
         if spot is None:
             raise StepFailed(f"{robot.name}: no free spot off {other}'s way within {tune.ASIDE_SEARCH_M:g} m")
         await _transition(session, Event.MOVE, f"making way for {other}")
+        session.making_way = True
         pace = step.pace(session.link.limits())
         await _go(session, spot, pace)
         waited = await until_passed(session, request, home)

@@ -63,10 +63,11 @@ async def until_passed(session: Session, request: dict, home) -> float:
 
 def _passed(redis, robot_id: int, other: int, home, near: float, clear: float) -> bool:
     """Whether the robot made way for (other) has passed `home`, is done, or waits for this one (until_passed)."""
-    plans, claims, now = state.read(redis, "plans"), state.read(redis, "claims"), time.time()
     if not fleet.is_busy(other):
         return True  # done with its instruction
-    if state.read(redis, "waits").get(other, {}).get("for") == robot_id:
+    plans, claims, waits = state.read_all(redis, "plans", "claims", "waits")
+    now = time.time()
+    if waits.get(other, {}).get("for") == robot_id:
         return True  # its way now goes through the spot aside (run af: each waited for the other for 120 s)
     if other not in plans:  # (between two plans, or two tries of a stalled trip, it has not passed: run w)
         return False

@@ -6,9 +6,9 @@ fails their executions ("executor lost"). One tick (every half second in `python
 1. robots with queued executions and no runner are woken again (their executor's sweep finds them too);
 2. each enabled time slot that covers now and has not run today becomes an instruction (source "schedule");
    instructions waiting for a free robot are allocated when one is free (execution.dispatch.retry);
-3. robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle in ready longer than
-   FLEET_IDLE_TIMEOUT_SECONDS go offline (they wake on the next instruction);
-4. the sweeps finish what has no owner any more (execution/sweeps.py: stale received instructions,
+3. every SLOW_S (five seconds), robots in dialog with no answer for DIALOG_TIMEOUT go back to ready; robots idle
+   in ready longer than FLEET_IDLE_TIMEOUT_SECONDS go offline (they wake on the next instruction);
+4. and the sweeps finish what has no owner any more (execution/sweeps.py: stale received instructions,
    unanswered questions, work queued for robots offline, instructions whose settle was lost).
 
 The clock is injectable: Clock(start, scale) runs schedules time-compressed (tests, demos).
@@ -106,14 +106,20 @@ def watch() -> dict:
     return {"recovered": watchdog.recover()}
 
 
-def tick(clock: Clock) -> dict:
-    """One pass of the loop; return what it did (for logs and tests)."""
+SLOW_S = 5.0  # between the slow passes (idle timeouts, sweeps): what they look for is a minute old or more
+
+
+def tick(clock: Clock, slow: bool = True) -> dict:
+    """One pass of the loop; return what it did (for logs and tests). slow: also the idle timeouts and the
+    sweeps, whose limits are a minute and more (the loop runs them every SLOW_S, not every tick: at 100
+    robots they were a third of the scheduler's CPU)."""
     close_old_connections()
     report = {"recovered": watchdog.recover(), "kicked": watchdog.kick_stalled()}
     report["scheduled"] = [instruction.pk for instruction in run_due_slots(clock.now())]
     report["allocated"] = dispatch.retry()  # instructions that waited for a free robot
-    expire_idle(timezone.now())
-    report.update(sweeps.sweep())
+    if slow:
+        expire_idle(timezone.now())
+        report.update(sweeps.sweep())
     return report
 
 
@@ -123,16 +129,20 @@ def loop(
     should_stop=lambda: False,
     watch_every: float = coordination.WATCHDOG_S,
     beat=lambda: None,
+    slow_every: float = SLOW_S,
 ) -> None:
-    """Watch every watch_every and tick every period until should_stop() says so; a failing pass is logged.
-    beat() at every pass: the process's heartbeat (a pass that hangs is seen as hung)."""
-    next_tick = time.monotonic()
+    """Watch every watch_every, tick every period and make the tick slow every slow_every until should_stop()
+    says so; a failing pass is logged. beat() at every pass: the process's heartbeat (a pass that hangs is seen
+    as hung)."""
+    next_tick = next_slow = time.monotonic()
     while not should_stop():
         beat()
         started = time.monotonic()
         if started >= next_tick:
-            _logged(tick, clock)
+            slow = started >= next_slow
+            _logged(tick, clock, slow)
             next_tick = started + period
+            next_slow = started + slow_every if slow else next_slow
         else:
             _logged(watch)
         time.sleep(max(0.0, min(watch_every, period) - (time.monotonic() - started)))

@@ -84,6 +84,7 @@ class Session:
     commanded: bool = False
     moving: bool = False
     gate_checked: bool = False  # the links process's verdict on the robot's odometry was read
+    making_way: bool = False  # its trips are another's way through: planned before the rest (traffic.plan)
 
     @property
     def robot(self):

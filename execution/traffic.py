@@ -103,7 +103,7 @@ def obstacles(redis, robot_id: int, now: float, around: set[int] = frozenset()):
     return table, still
 
 
-def plan(
+async def plan(
     robot: Robot,
     start,
     goal,
@@ -112,20 +112,24 @@ def plan(
     progress=None,
     settled: bool = False,
     may_ask: bool = False,
+    first: bool = False,
 ) -> list[tuple]:
     """Plan and reserve the robot's timed path [(x, y, t), ...] from start to goal (wall-clock t), in its
     turn (planning_turn): each plan sees the ones reserved before it. Claims are never held up by a plan.
     settled: the goal is the spot an earlier plan of this trip chose; it moves only if a robot would touch it.
     may_ask: robots parked in the way, idle, may be asked to make way (the plan then passes where they stand
-    once they have moved; ask_to_make_way sends them the instruction after the turn)."""
+    once they have moved; ask_to_make_way sends them the instruction after the turn).
+    first: planned before every robot waiting for its turn (a robot making way: the others wait for it); the
+    others, the longest trip first (its expected time: the straight line at `speed`)."""
     asked = time.monotonic()
     progress = _now_and_then(progress)
-    with state.planning_turn(robot, progress):
+    longest = tune.FIRST_IN_TURN_S if first else math.dist(start[:2], goal[:2]) / max(speed, 1e-3)
+    async with state.planning_turn(robot, progress, longest):
         began = time.monotonic()
-        path = _plan(robot, start, goal, speed, around, progress, settled, may_ask)
+        path = await blocking.call(_plan, robot, start, goal, speed, around, progress, settled, may_ask)
     done = time.monotonic()
     if may_ask:
-        ask_to_make_way(robot)
+        await blocking.call(ask_to_make_way, robot)
     if path is not None:
         log.info(
             "traffic: %s planned in %.2f s after %.2f s waiting for its turn; arrives in %.0f s",
@@ -458,7 +462,7 @@ async def wait_for(session: Session, start, end, planned=None, ahead=(), gone_ro
                 here = (await at_rest(session))[:2]
                 await blocking.call(claim, robot, here, here, session.check, everyone, planned)
             same_since, last = now, blocker
-            name = await blocking.call(_name_of, blocker)
+            name = await blocking.call(fleet.name_of, blocker)
             log.debug("traffic: %s waits for %s to go from %s to %s", robot.name, name, start, end)
             await blocking.call(live.path, robot, None, name)
             noted = -math.inf
@@ -492,10 +496,6 @@ async def wait_for(session: Session, start, end, planned=None, ahead=(), gone_ro
         )  # a robot waiting still reads where it is (and odometry that stops fails the step)
     if last is not None:
         await blocking.call(live.path, robot, None, None)
-
-
-def _name_of(robot_id: int) -> str:
-    return Robot.objects.filter(pk=robot_id).values_list("name", flat=True).first() or f"#{robot_id}"
 
 
 def _note_wait(redis, robot: Robot, blocker: int, why: str, stretch) -> list:

@@ -43,6 +43,11 @@ def standing(parked: dict[int, dict], exclude: set[int]) -> list[tuple[plain.Cap
     return out
 
 
+def name_of(robot_id: int) -> str:
+    """A robot's name for the log and the map ("#<id>" once it is gone)."""
+    return Robot.objects.filter(pk=robot_id).values_list("name", flat=True).first() or f"#{robot_id}"
+
+
 def busy_ids() -> set[int]:
     """Robots with an execution running or queued: one standing now is about to move, not parked."""
     return set(Execution.objects.filter(status__in=BUSY).values_list("robot_id", flat=True))

@@ -9,6 +9,7 @@ name); an entry with "expires" in the past is no longer read (a dead worker's la
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import json
 import logging
@@ -37,6 +38,14 @@ def read(redis, name: str) -> dict[int, dict]:
     return _live(redis.hgetall(key(name)))
 
 
+def read_all(redis, *names: str) -> list[dict[int, dict]]:
+    """Several traffic hashes (read), in one round trip."""
+    with redis.pipeline(transaction=False) as pipe:
+        for name in names:
+            pipe.hgetall(key(name))
+        return [_live(raw) for raw in pipe.execute()]
+
+
 def _live(raw_entries: dict) -> dict[int, dict]:
     now, out = time.time(), {}
     for field, raw in raw_entries.items():
@@ -50,27 +59,70 @@ def write(redis, name: str, robot_id: int, entry: dict) -> None:
     redis.hset(key(name), str(robot_id), json.dumps(entry, separators=(",", ":")))
 
 
-@contextlib.contextmanager
-def planning_turn(robot: Robot, progress=None):
+# The turn goes to the first live waiter in the queue (lowest score): waiters whose liveness key lapsed (their
+# executor died) are dropped from its head; taken, the turn is a key of its own, as before.
+TAKE_TURN = """
+while true do
+  local head = redis.call('zrange', KEYS[2], 0, 0)[1]
+  if not head or redis.call('exists', KEYS[3] .. head) == 1 then break end
+  redis.call('zrem', KEYS[2], head)
+end
+if redis.call('zrange', KEYS[2], 0, 0)[1] == ARGV[1]
+   and redis.call('set', KEYS[1], ARGV[1], 'NX', 'PX', ARGV[2]) then
+  redis.call('zrem', KEYS[2], ARGV[1])
+  return 1
+end
+return 0
+"""
+
+
+@contextlib.asynccontextmanager
+async def planning_turn(robot: Robot, progress=None, longest: float = 0.0):
     """One plan at a time across the fleet (prioritized planning: robots sent together are planned in turn,
-    each against the paths reserved before it, instead of all against the same snapshot). A turn that does not
-    come within TURN_WAIT_S is not waited for (the claims still keep robots apart); a planner that dies lets
-    its turn lapse after TURN_TTL_MS."""
-    redis, token = coordination.connection(), coordination.new_token()
+    each against the paths reserved before it, instead of all against the same snapshot), the longest trips
+    first (`longest`: the seconds this one is expected to take): the robots that decide when the fleet is
+    done get the ways the others then go round, and the ones planned last are those with time to spare. A
+    turn that does not come within TURN_WAIT_S is not waited for (the claims still keep robots apart); a
+    planner that dies lets its turn lapse after TURN_TTL_MS, a waiter that dies leaves the queue after
+    TURN_WAITER_TTL_MS. Waited for on the loop: a robot waiting for its turn holds no thread of the executor's
+    blocking pool (32 robots sent together, 8 to a pool of 8, held them all polling)."""
+    redis, token = coordination.aconnection(), coordination.new_token()
+    queue, waiters = key("turn:queue"), key("turn:waiter:")
+    alive = waiters + token
     deadline = time.monotonic() + tune.TURN_WAIT_S
     held = False
-    while not (held := bool(redis.set(key("turn"), token, nx=True, px=tune.TURN_TTL_MS))):
-        if time.monotonic() > deadline:
-            log.info("traffic: %s plans without waiting longer for its turn", robot.name)
-            break
-        if progress is not None:
-            progress()
-        time.sleep(tune.TURN_POLL_S)
+    try:
+        while True:
+            async with redis.pipeline(transaction=False) as pipe:
+                # alive before queued (never queued and lapsed), and queued again each time (a waiter whose loop
+                # was late by TURN_WAITER_TTL_MS was dropped)
+                pipe.set(alive, 1, px=tune.TURN_WAITER_TTL_MS)
+                pipe.zadd(queue, {token: -longest}, nx=True)
+                pipe.eval(TAKE_TURN, 3, key("turn"), queue, waiters, token, tune.TURN_TTL_MS)
+                held = bool((await pipe.execute())[2])
+            if held:
+                break
+            if time.monotonic() > deadline:
+                log.info("traffic: %s plans without waiting longer for its turn", robot.name)
+                break
+            if progress is not None:
+                progress()
+            await asyncio.sleep(tune.TURN_POLL_S)
+    finally:
+        if not held:  # (gave up, stopped or cancelled: out of the queue)
+            await asyncio.shield(_leave_queue(redis, queue, alive, token))
     try:
         yield
     finally:
-        if held:
-            redis.eval(coordination.RELEASE, 1, key("turn"), token)
+        if held:  # (cancelled, the turn lapses after TURN_TTL_MS instead)
+            await asyncio.shield(redis.eval(coordination.RELEASE, 1, key("turn"), token))
+
+
+async def _leave_queue(redis, queue: str, alive: str, token: str) -> None:
+    async with redis.pipeline(transaction=False) as pipe:
+        pipe.zrem(queue, token)
+        pipe.delete(alive)
+        await pipe.execute()
 
 
 def request_way(redis, robot: Robot, radius: float, idle: dict, through) -> None:

@@ -355,6 +355,7 @@ class SpaceTimeSearch:
         dist = {goal: 0.0}
         heap = [(0.0, goal)]
         limit = math.inf
+        ground: dict[Cell, bool] = {start: True}  # passable(), asked once per cell (up to 8 asked it again)
         for pops in itertools.count():
             if not heap:
                 break
@@ -370,7 +371,12 @@ class SpaceTimeSearch:
             for dc, dr, step in MOVES:
                 n = (c[0] + dc, c[1] + dr)
                 nd = d + step
-                if nd < dist.get(n, math.inf) and (self.passable(n) or n == start):
+                if nd >= dist.get(n, math.inf):
+                    continue
+                free = ground.get(n)
+                if free is None:
+                    free = ground[n] = self.passable(n)
+                if free:
                     dist[n] = nd
                     heapq.heappush(heap, (nd, n))
         return dist

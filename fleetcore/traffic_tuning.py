@@ -24,6 +24,8 @@ PASS_WAIT_S = 30.0  # s such a robot waits for the robots under way yet to pass 
 TURN_WAIT_S = 30.0  # s a robot waits for its turn to plan (robots sent together are planned one by one)
 TURN_TTL_MS = 10_000  # a turn its planner no longer holds (a dead worker) lapses after this
 TURN_POLL_S = 0.05
+TURN_WAITER_TTL_MS = 1_000  # a robot waiting for its turn that stopped asking (its executor died) is dropped
+FIRST_IN_TURN_S = 1e9  # s: the trip time a robot making way queues for its turn with, ahead of any trip
 PROGRESS_EVERY_S = 0.1  # s between a planning robot's checks of its stop flag (_now_and_then)
 MAP_POINTS = 60  # points at most of a reserved route kept for the map (routes())
 

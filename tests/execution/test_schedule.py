@@ -92,3 +92,27 @@ def test_a_robot_held_by_another_operator_is_refused(table12_world, operator, se
     assert "held by olga" in instruction.outcome
     tiago = Robot.objects.get(name="tiago").pk
     assert coordination.lock_holders([tiago])[tiago] is None
+
+
+class FakeTime:
+    """time.monotonic and time.sleep of the scheduler's loop on a clock that only sleeping moves."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += seconds
+
+
+def test_the_loop_ticks_every_period_and_runs_the_slow_pass_every_slow_s(monkeypatch):
+    fake, ticks = FakeTime(), []
+    monkeypatch.setattr(scheduler, "time", fake)
+    monkeypatch.setattr(scheduler, "tick", lambda clock, slow: ticks.append((fake.now, slow)) or {})
+    monkeypatch.setattr(scheduler, "watch", lambda: {})
+    scheduler.loop(scheduler.Clock(), period=0.5, should_stop=lambda: fake.now >= 1020.0, slow_every=5.0)
+    assert len(ticks) == 40  # 20 s of ticks every half second
+    slow = [round(at - 1000.0, 2) for at, was_slow in ticks if was_slow]
+    assert slow == [0.0, 5.0, 10.0, 15.0]  # the first pass is slow, then one in every ten

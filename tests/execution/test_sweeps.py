@@ -42,7 +42,7 @@ def test_an_unanswered_question_expires_with_a_note_its_robot_leaves_the_dialog_
     old = instruction("needs_user", 605, interpreted_at=ago(605), outcome="Which robot?")
     Robot.objects.transition(robot.pk, Event.ASK, "Which robot?", old)
     recent = instruction("needs_user", 5, interpreted_at=ago(5))
-    assert sweeps.sweep()["needs_user"] == [old.pk]  # the scheduler runs the sweeps every tick
+    assert sweeps.sweep()["needs_user"] == [old.pk]  # the scheduler runs the sweeps every SLOW_S
     old.refresh_from_db(), recent.refresh_from_db(), robot.refresh_from_db()
     assert (old.status, old.outcome) == ("cancelled", "Which robot? (expired: no answer within 10 min)")
     assert old.expired and not recent.expired and recent.status == "needs_user"

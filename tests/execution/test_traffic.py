@@ -36,6 +36,11 @@ def robots(transactional_db, exec_settings):
     cache.delete_many([live.POSE_CACHE_KEY.format(id=r.pk) for r in made.values()])
 
 
+def plan(robot, start, goal, speed, **options):
+    """traffic.plan (a step's, on the executor's loop) from a test: on a loop of its own."""
+    return asyncio.run(traffic.plan(robot, start, goal, speed, **options))
+
+
 def test_a_claimed_stretch_is_refused_to_a_robot_crossing_it_until_released(robots):
     a, b = robots["a"], robots["b"]
     assert traffic.claim(a, (-2.0, 0.0), (2.0, 0.0)) is None
@@ -73,8 +78,8 @@ def test_a_robot_on_time_lets_one_late_on_its_plan_pass_first_where_that_one_was
 
 def test_a_plan_goes_around_the_path_reserved_before_it(robots):
     a, b = robots["a"], robots["b"]
-    first = traffic.plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
-    second = traffic.plan(b, (0.0, -2.0), (0.0, 2.0), 0.3)
+    first = plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
+    second = plan(b, (0.0, -2.0), (0.0, 2.0), 0.3)
     assert second[-1][:2] == (0.0, 2.0) and first[-1][:2] == (2.0, 0.0)
     table = plain.ReservationTable()
     table.reserve_path("a", first, traffic_fleet.reach(a), lambda t: 0.0)
@@ -156,7 +161,7 @@ def test_a_map_that_opens_now_gets_the_reserved_routes_and_the_waits(robots):
     from portal.snapshots import robot_rows
 
     a, b, c = robots["a"], robots["b"], robots["c"]
-    traffic.plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
+    plan(a, (-2.0, 0.0), (2.0, 0.0), 0.3)
     traffic_state.write(coordination.connection(), "waits", b.pk, {"for": a.pk, "expires": 1e12})
     rows = {row["name"]: row for row in robot_rows([a, b, c])}
     route = rows["a"]["route"]
@@ -194,7 +199,7 @@ def test_a_robot_that_has_not_planned_yet_is_gone_round_as_standing_for_good(rob
     have left, made b's own plan wait on its start for a to pass, and the order went round.)"""
     a, b = robots["a"], robots["b"]
     assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0)) is None
-    path = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
+    path = plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
     assert path[-1][:2] == (4.0, -2.0)
     closest = min(
         plain.segment_distance((0.0, -2.0), (0.0, -2.0), p[:2], q[:2]) for p, q in itertools.pairwise(path)
@@ -217,10 +222,10 @@ def test_when_the_reservations_leave_no_plan_the_robot_has_none_and_reserves_not
         "expires": now + 2000.0,
     }
     traffic_state.write(redis, "plans", c.pk, entry)
-    assert traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5) is None
+    assert plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5) is None
     assert a.pk not in traffic_state.read(redis, "plans") and a.pk not in traffic_state.read(redis, "timed")
     traffic_state.release(c, None)
-    assert traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)[-1][:2] == (4.0, -2.0)  # once it has gone
+    assert plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)[-1][:2] == (4.0, -2.0)  # once it has gone
 
 
 def test_plans_keep_more_room_between_robots_than_the_claims_ask(robots):
@@ -229,8 +234,8 @@ def test_plans_keep_more_room_between_robots_than_the_claims_ask(robots):
     more than both reaches, where a robot 0.1 m off its line is refused its claim), so robots off their
     plans' lines still get their claims where their plans pass each other."""
     a, b = robots["a"], robots["b"]
-    first = traffic.plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
-    second = traffic.plan(b, (4.0, -1.45), (-4.0, -1.45), 0.5)
+    first = plan(a, (-4.0, -2.0), (4.0, -2.0), 0.5)
+    second = plan(b, (4.0, -1.45), (-4.0, -1.45), 0.5)
     end = max(first[-1][2], second[-1][2])
     times = [first[0][2] + i * 0.05 for i in range(int((end - first[0][2]) / 0.05))]
     closest = min(math.dist(position(first, t), position(second, t)) for t in times)
@@ -244,7 +249,7 @@ def test_a_goal_kept_from_an_earlier_plan_next_to_a_robot_standing_is_reached_by
         -2.0 + traffic_fleet.reach(a) + traffic_fleet.reach(b) + tune.CLAIM_MARGIN + 0.03,
     )  # inside the margins
     with caplog.at_level("INFO", logger="execution.traffic"):
-        path = traffic.plan(a, (-2.0, 0.0), near_b, 0.5, settled=True)  # kept: nobody would touch it there
+        path = plan(a, (-2.0, 0.0), near_b, 0.5, settled=True)  # kept: nobody would touch it there
     assert path[-1][:2] == pytest.approx(near_b)
     assert "no conflict-free plan" not in caplog.text and "found no plan" not in caplog.text, caplog.text
 
@@ -255,7 +260,7 @@ def test_a_plan_to_a_goal_next_to_a_robot_standing_goes_round_it_as_far_as_the_c
     refused there, rerouted and planned the same, four times, and the step failed: run av)."""
     a, b = robots["a"], robots["b"]  # b stands at (0, -2)
     west_of_b = (-(traffic_fleet.reach(a) + traffic_fleet.reach(b) + tune.CLAIM_MARGIN + 0.03), -2.0)
-    path = traffic.plan(a, (2.0, -2.0), west_of_b, 0.5, settled=True)
+    path = plan(a, (2.0, -2.0), west_of_b, 0.5, settled=True)
     assert path[-1][:2] == pytest.approx(west_of_b)
     here = (2.0, -2.0)
     for x, y, _, hold in driving.stretches(path):
@@ -294,7 +299,7 @@ def test_a_robot_giving_way_backs_straight_off_else_aside_and_never_into_a_shelf
 
 
 def test_a_trip_goes_where_the_robot_can_turn_and_only_near_its_ends_where_it_can_just_pass(
-    db, exec_settings
+    transactional_db, exec_settings
 ):
     load_world_into_db("warehouse")
     husky = [[-0.495, -0.285], [-0.495, 0.285], [0.495, 0.285], [0.495, -0.285]]
@@ -307,9 +312,9 @@ def test_a_trip_goes_where_the_robot_can_turn_and_only_near_its_ends_where_it_ca
     assert planner.free(*planner.to_cell(*by_the_rack)) and not passable(plain.cell_of(by_the_rack))
     _, passable = traffic.trip_ground(robot, (1.2, 5.0), by_the_rack)
     assert passable(plain.cell_of(by_the_rack))  # near its goal: room to pass will do
-    path = traffic.plan(robot, (1.2, 5.0), by_the_rack, 0.5)
+    path = plan(robot, (1.2, 5.0), by_the_rack, 0.5)
     assert path[-1][:2] == by_the_rack
-    path = traffic.plan(robot, (1.2, 5.0), (14.0, 14.0), 0.5)  # north, through an aisle, round racks' corners
+    path = plan(robot, (1.2, 5.0), (14.0, 14.0), 0.5)  # north, through an aisle, round racks' corners
     assert path[-1][:2] == (14.0, 14.0)
     corners = [p[:2] for p in path[1:-1]]  # where it turns on the spot
     assert corners and all(turning.free(*turning.to_cell(*p)) for p in corners), corners
@@ -400,7 +405,7 @@ def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_it
     assert asyncio.run(make_way.until_passed(aside, request, home)) < 0.5
     redis.hdel(traffic_state.key("waits"), str(a.pk))
     cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": 0.0, "y": -1.0, "yaw": 0.0}, 60)
-    traffic.plan(a, (-2.0, -2.0), (2.0, -2.0), 0.3)  # a's plan passes b's home, where b stood
+    plan(a, (-2.0, -2.0), (2.0, -2.0), 0.3)  # a's plan passes b's home, where b stood
     entry = traffic_state.read(redis, "plans")[a.pk]
     late = [[c, r, t0 - 1000.0, t1 - 1000.0] for c, r, t0, t1 in entry["cells"]]
     # a is held up: its plan's times are past
@@ -433,7 +438,7 @@ def test_a_robot_does_not_plan_again_for_its_goal_where_another_has_yet_to_pass(
     anew from a spot b's earlier plan has it pass first. Once b's claim begins past it, a may plan again."""
     a, b = robots["a"], robots["b"]
     spot = (0.0, 0.6)
-    path = traffic.plan(b, (0.0, -2.0), (0.0, 2.0), 0.5)
+    path = plan(b, (0.0, -2.0), (0.0, 2.0), 0.5)
     assert traffic.claim(b, (0.0, -2.0), (0.0, -2.0), planned=(path[0][2], path[0][2])) is None
     assert traffic.yet_to_pass(a, spot)
     assert not traffic.yet_to_pass(a, (3.0, 0.6))  # nowhere near its way
@@ -479,3 +484,48 @@ def test_a_parked_robot_a_trip_went_round_and_still_finds_in_its_way_is_asked_to
     assert sent == [(a.pk, b.pk)]
     request = traffic_state.read(redis, "makeway")[b.pk]
     assert request["for"] == a.pk and request["route"] == [[-2.0, -2.0], [2.0, -2.0]]
+
+
+def test_robots_waiting_for_the_turn_to_plan_get_it_longest_trip_first(exec_settings):
+    """Four robots ask while another plans: once it is done they plan one at a time, a robot making way first
+    (others wait for it), then the longest expected trip first (the robots that decide when the fleet is done
+    get their ways first)."""
+    got = []
+
+    async def wait_and_plan(name: str, longest: float) -> None:
+        async with traffic_state.planning_turn(types.SimpleNamespace(name=name), None, longest):
+            got.append(name)
+            await asyncio.sleep(0.05)
+
+    async def scene() -> None:
+        async with traffic_state.planning_turn(types.SimpleNamespace(name="first"), None, 1.0):
+            waiting = [
+                asyncio.ensure_future(wait_and_plan(name, longest))
+                for name, longest in (
+                    ("short", 10.0),
+                    ("long", 50.0),
+                    ("aside", tune.FIRST_IN_TURN_S),
+                    ("middle", 30.0),
+                )
+            ]
+            await asyncio.sleep(0.3)  # every one of them queued meanwhile
+            assert got == []  # one plan at a time
+        await asyncio.wait_for(asyncio.gather(*waiting), 10)
+
+    asyncio.run(scene())
+    assert got == ["aside", "long", "middle", "short"]
+
+
+def test_a_waiter_that_died_in_the_turn_queue_holds_nobody_up(exec_settings):
+    """A robot queued for the turn whose executor died (it stopped renewing its liveness key) is dropped from
+    the head of the queue, and the next robot gets the turn at once."""
+    redis = coordination.connection()
+    redis.zadd(traffic_state.key("turn:queue"), {"dead-token": -1e9})  # at the head, never alive again
+
+    async def plan_once() -> float:
+        t0 = time.monotonic()
+        async with traffic_state.planning_turn(types.SimpleNamespace(name="live"), None, 5.0):
+            return time.monotonic() - t0
+
+    assert asyncio.run(plan_once()) < 1.0
+    assert redis.zcard(traffic_state.key("turn:queue")) == 0
