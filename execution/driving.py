@@ -62,8 +62,9 @@ async def travel(session: Session, goal, pace: Pace, nav: bool = False) -> tuple
             speed = pace.planned(nav, learned) * session.link.clock.rate  # m per second of wall time
             settled = replans > 0 and spot != tuple(goal)
             path = await traffic.plan(
-                robot, pose[:2], spot, speed, around, session.check, settled, True, session.making_way
-            )
+                robot, pose[:2], spot, speed, around, session.check, settled,
+                may_ask=True, first=session.making_way,
+            )  # fmt: skip
             if path is None:  # it stands (for good, as the others plan) until a way opens
                 await blocking.call(state.drop_plan, robot)
                 stuck_since = stuck_since or time.monotonic()

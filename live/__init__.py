@@ -111,9 +111,8 @@ def send(group: str, payload: dict) -> None:
         return
     loop = getattr(_home, "loop", None)
     if loop is not None and not loop.is_closed():
-        with contextlib.suppress(
-            RuntimeError
-        ):  # the loop closed meanwhile: the push is lost, as on a failure
+        # (RuntimeError: the loop closed meanwhile, and the push is lost, as on a failure)
+        with contextlib.suppress(RuntimeError):
             future = asyncio.run_coroutine_threadsafe(_send_logged(layer, group, payload), loop)
             _delivering.add(future)
             future.add_done_callback(_delivering.discard)
