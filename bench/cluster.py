@@ -43,6 +43,7 @@ from bench import report as report_file
 from deploy.cluster import Cluster, down, host_pids, reason_unavailable
 from deploy.cluster_client import Portal
 from experiments.stats import summarize
+from portal.fanout import decode
 
 DECODED = 5  # dashboards that decode every pose (robots seen, staleness); the rest count poses per batch
 LIVE_S = 12.0  # seconds the dashboards read poses, while every robot turns
@@ -121,9 +122,9 @@ async def browser(url: str, cookie: str, seen: dict, stale: list[float] | None, 
     """One dashboard: every fleet.poses batch it is pushed while live["on"], counted per robot, with each pose's
     staleness; live["connected"] counts the dashboards connected so far.
 
-    Only the dashboards given `stale` read every pose (robots seen, staleness); the others count the poses of each
-    batch without decoding it (seen["poses"], seen["batches"]): the server does the same work for every socket,
-    and one client process could not decode 50 sockets' worth of poses on this machine."""
+    Only the dashboards given `stale` read every pose (robots seen, staleness); the others count the rows of each
+    batch without making poses of them (seen["poses"], seen["batches"]): the server does the same work for every
+    socket, and one client process could not decode 50 sockets' worth of poses on this machine."""
     async with await connect(url, cookie) as ws:
         live["connected"] += 1
         while not live["stop"].is_set():
@@ -133,12 +134,13 @@ async def browser(url: str, cookie: str, seen: dict, stale: list[float] | None, 
                 continue
             if not live["on"] or '"fleet.poses"' not in raw:
                 continue
+            message = json.loads(raw)
             if stale is None:
                 seen["batches"] += 1
-                seen["poses"] += raw.count('"id":')
+                seen["poses"] += len(message.get("rows") or [])
                 continue
             now = time.time()
-            for pose in json.loads(raw).get("poses", []):
+            for pose in decode(message):
                 seen[pose["id"]] += 1
                 if pose.get("t"):
                     stale.append((now - pose["t"]) * 1000)

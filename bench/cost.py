@@ -89,8 +89,8 @@ async def turn_all(clients: dict, robots: list[dict], stop: asyncio.Event, skip:
 async def dashboard(
     url: str, cookie: str, origin: str, seen: dict, stop: asyncio.Event, deflate: bool
 ) -> None:
-    """One browser on the dashboard: counts the fleet.poses frames and poses it is pushed (no decoding); it
-    offers permessage-deflate as browsers do, unless told not to."""
+    """One browser on the dashboard: counts the fleet.poses frames and poses it is pushed (rows, not made into
+    poses); it offers permessage-deflate as browsers do, unless told not to."""
     headers = {"Cookie": f"sessionid={cookie}", "Origin": origin}
     compression = "deflate" if deflate else None
     async with websockets.connect(
@@ -101,7 +101,7 @@ async def dashboard(
                 raw = await asyncio.wait_for(ws.recv(), 0.5)
                 if '"fleet.poses"' in raw:
                     seen["frames"] += 1
-                    seen["poses"] += raw.count('"id":')
+                    seen["poses"] += len(json.loads(raw).get("rows") or [])
 
 
 def register(url: str) -> list[dict]:

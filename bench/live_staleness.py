@@ -13,6 +13,7 @@ import django
 import websockets
 
 from experiments.stats import summarize
+from portal.fanout import decode
 
 
 async def client(url: str, cookie: str, origin: str, samples: list[float], stop: asyncio.Event) -> int:
@@ -30,7 +31,7 @@ async def client(url: str, cookie: str, origin: str, samples: list[float], stop:
             frames += 1
             msg = json.loads(raw)
             if msg.get("type") == "fleet.poses":
-                samples.extend((now - p["t"]) * 1000 for p in msg.get("poses", []) if p.get("t"))
+                samples.extend((now - p["t"]) * 1000 for p in decode(msg) if p.get("t"))
     return frames
 
 

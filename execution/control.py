@@ -27,7 +27,7 @@ from execution.link import LinkError, publish_zero
 from execution.models import Execution
 from execution.runner import settle
 from fleetcore import faults, motion
-from robots.commands import CommandSurface, surfaces
+from robots.commands import CommandSurface, surface_rows, surfaces
 from robots.models import Robot
 from robots.rosbridge import pool as links
 from robots.rosbridge import sync
@@ -197,7 +197,8 @@ def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
     ValueError (no such robot).
     """
     ids = list(dict.fromkeys(robot_ids))
-    robots = {robot.pk: robot for robot in Robot.objects.filter(pk__in=ids).prefetch_related("bindings")}
+    rows = surface_rows(Robot.objects.filter(pk__in=ids), "max_linear", "max_angular")
+    robots = {robot.pk: robot for robot in rows}
     found = list(robots)
     held = {lease.robot_id: lease.user for lease in leases.active(found)}
     busy = dict(

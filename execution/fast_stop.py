@@ -25,7 +25,7 @@ from channels.db import database_sync_to_async
 
 from execution import coordination
 from robots import commands, stopsocket
-from robots.commands import CommandSurface, surfaces
+from robots.commands import CommandSurface, surface_rows, surfaces
 from robots.models import Robot
 from robots.rosbridge import pool, sync
 
@@ -36,7 +36,7 @@ RELOAD_S = 10.0
 
 def load_targets() -> dict[int, CommandSurface]:
     """Every robot's command surface (one query for robots and bindings); robots without a move topic are left out."""
-    found = surfaces(Robot.objects.prefetch_related("bindings"))
+    found = surfaces(surface_rows(Robot.objects.all()))
     return {pk: surface for pk, surface in found.items() if surface.can_move}
 
 

@@ -28,7 +28,7 @@ from execution.link import LinkError
 from execution.models import Instruction
 from interpreter.service import warm_up
 from portal import feeds, inspector, snapshots, socket_input
-from portal.fanout import PoseFanout
+from portal.fanout import EventFanout, PoseFanout
 from portal.schemas import InstructionOut
 from portal.socket_input import BadFrame
 from robots.models import Robot
@@ -229,6 +229,15 @@ class _StrictJson(AsyncJsonWebsocketConsumer):
     async def encode_json(cls, content):
         return json.dumps(content, allow_nan=False)
 
+    async def dispatch(self, message):
+        """Channels' dispatch without its per-message close_old_connections, a hop to the one shared sync
+        thread for every frame and push. This consumer reaches the database only through
+        database_sync_to_async, whose thread closes old connections around each call itself."""
+        handler = getattr(self, get_handler_name(message), None)
+        if handler is None:
+            raise ValueError(f"No handler for message type {message['type']}")
+        await handler(message)
+
 
 class _PageConsumer(_StrictJson):
     """Authenticate, join the page's groups, send the snapshot first, then forward every delta."""
@@ -253,10 +262,12 @@ class _PageConsumer(_StrictJson):
             await database_sync_to_async(
                 warm_up, thread_sensitive=False
             )()  # a first typed stop waits for no ontology
-        self.joined = self.group_names()
-        for group in self.joined:
-            await self.channel_layer.group_add(group, self.channel_name)
+        self.joined = [EventFanout.of(self.channel_layer, group) for group in self.group_names()]
+        for events in self.joined:  # the process's one reader of each group (portal.fanout)
+            await events.subscribe(self)
         await self.send_json(snapshot)
+        for events in self.joined:  # what came meanwhile follows the snapshot
+            events.release(self)
         self.poses = PoseFanout.of(self.channel_layer)  # the ticks of poses after the snapshot, from the
         await self.poses.subscribe(self, self.poses_of())  # process's one reader (portal.fanout)
 
@@ -269,15 +280,6 @@ class _PageConsumer(_StrictJson):
         """The abilities a socket's commands need, asked once at connect."""
         return {name: may(user, name) for name in {"view", *(c.ability for c in COMMANDS.values())}}
 
-    async def dispatch(self, message):
-        """Channels' dispatch without its per-message close_old_connections, a hop to the one shared sync
-        thread for every frame and push. This consumer reaches the database only through
-        database_sync_to_async, whose thread closes old connections around each call itself."""
-        handler = getattr(self, get_handler_name(message), None)
-        if handler is None:
-            raise ValueError(f"No handler for message type {message['type']}")
-        await handler(message)
-
     async def disconnect(self, code):
         if getattr(self, "teleop", None) is not None:
             self.teleop.close()
@@ -286,8 +288,8 @@ class _PageConsumer(_StrictJson):
         try:
             if getattr(self, "poses", None) is not None:
                 await self.poses.unsubscribe(self)
-            for group in getattr(self, "joined", ()):
-                await self.channel_layer.group_discard(group, self.channel_name)
+            for events in getattr(self, "joined", ()):
+                await events.unsubscribe(self)
         except Exception as exc:  # Redis frozen or refusing writes: the groups' entries expire on their own
             log.warning("socket closed without leaving its groups: %r", exc)
 
@@ -463,13 +465,14 @@ class AlertsConsumer(_StrictJson):
         if not await database_sync_to_async(may)(user, "view_alerts"):
             await self.close(code=4403)
             return
-        await self.channel_layer.group_add(live.ALERTS_GROUP, self.channel_name)
-        self.joined = True
+        self.events = EventFanout.of(self.channel_layer, live.ALERTS_GROUP)
+        await self.events.subscribe(self)
         await self.send_json(await database_sync_to_async(snapshots.alerts_snapshot)())
+        self.events.release(self)
 
     async def disconnect(self, code):
-        if getattr(self, "joined", False):
-            await self.channel_layer.group_discard(live.ALERTS_GROUP, self.channel_name)
+        if getattr(self, "events", None) is not None:
+            await self.events.unsubscribe(self)
 
     async def alert_update(self, event):
         await self.send_json(event)

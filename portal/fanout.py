@@ -1,15 +1,22 @@
-"""The pose ticks, read once per web process and encoded once for all its dashboards.
+"""The pushes of a page's groups, read once per web process and handed to all its sockets there.
 
-The links process publishes one batch of poses per tick to the channel layer's poses group (robots.poses). If
-every dashboard socket were a member of that group, each tick would be copied into Redis once per socket, read
-back and decoded by each, and encoded again as JSON by each: work that grows as dashboards × robots, which at
-hundreds of robots and tens of dashboards is what fell behind first (docs/scale.md, "Measured on the cluster").
+Every push to the browsers goes through a channel-layer group: the pose ticks (robots.poses) and the events of
+the fleet, of one robot and of the alerts (live). If every page socket were a member of its groups, each push
+would be copied into Redis once per socket and read back by each: work that grows as sockets × pushes. At 100
+robots and 50 dashboards that was most of the web's time (docs/scale.md, "The cost of a robot"): a stop's 200
+status pushes made 10,000 Redis deliveries, a tick of poses was encoded 50 times.
 
-Instead each web process (each event loop) has one PoseFanout, the only member of the group for that process.
-It reads a tick, encodes it once, and hands the same text to every fleet socket of the process; a robot page gets
-its own robot's pose only. A socket still busy sending the previous tick (a slow client) is not waited for: the
-ticks it misses meanwhile are merged (the latest pose per robot) and sent as one when it is free, so a slow
-client costs its own encoding, never the others' rate.
+Instead each web process (each event loop) has one reader per group, the only member of the group for that
+process, which hands what it reads to the sockets subscribed to it there:
+
+- PoseFanout (the ticks of poses): encoded once for all the fleet sockets of the process; a robot page gets its
+  own robot's pose only. A socket still busy sending the previous tick (a slow client) is not waited for: the
+  ticks it misses meanwhile are merged (the latest pose per robot) and sent as one when it is free, so a slow
+  client costs its own encoding, never the others' rate.
+- EventFanout (every other push): each message dispatched to each subscribed consumer, in the order it came, as
+  the channel layer would have (its handler by the message's type). A socket's messages wait while its
+  snapshot is being sent, and a socket more than BACKLOG messages behind is closed (its page reconnects and
+  starts again from a snapshot) rather than left showing a fleet it no longer hears about.
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import contextlib
 import json
 import logging
 import weakref
+from collections import deque
 
 import live
 
@@ -26,19 +34,55 @@ log = logging.getLogger(__name__)
 
 TICK = live.poses([])["type"]  # the message type of a tick of poses
 REJOIN_S = 600.0  # renew the group membership well inside channels_redis's group_expiry (a day by default)
-_fanouts: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> its PoseFanout
+_fanouts: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> {(kind, group): reader}
+
+
+COLUMNS = ("id", "x", "y", "yaw", "v", "w", "t", "battery", "rtt", "fault", "fault_since")  # live.RobotPose's
 
 
 def encode(poses: list) -> str:
-    """The text of one fleet.poses message, as a consumer's send_json would encode it: strict JSON, never a bare
-    NaN or Infinity (JSON.parse in the browser would throw on it). A pose that cannot be said so is left out
-    (the gate in robots.poses should have refused it already), never the whole tick."""
+    """The text of one fleet.poses message for the browsers: a row per pose under the tick's columns.
+
+    {"type": "fleet.poses", "at": unix time, "fields": [...], "rows": [[...], ...]}: the fields are those any pose
+    of the tick has (COLUMNS' order, then any other in name order), null where a pose has none; `t` is in ms
+    after `at`. Half the text of an object per pose: every socket compresses what it is sent (permessage-
+    deflate), which was most of what a dashboard costs the web process, in proportion to the text. decode()
+    here and static/fleet/live.js make the poses back. Strict JSON, never a bare NaN or Infinity (JSON.parse
+    in the browser would throw on it): a pose that cannot be said so is left out (the gate in robots.poses
+    should have refused it already), never the whole tick."""
     try:
-        return json.dumps(live.poses(poses), allow_nan=False)
+        return _encode(poses)
     except ValueError:
         kept = [pose for pose in poses if _strict(pose)]
         log.error("pose fanout: %d poses with NaN or infinity left out", len(poses) - len(kept))
-        return json.dumps(live.poses(kept), allow_nan=False)
+        return _encode(kept)
+
+
+def _encode(poses: list) -> str:
+    present = set().union(*poses) if poses else set()
+    fields = [f for f in COLUMNS if f in present] + sorted(present.difference(COLUMNS))
+    rows = [[pose.get(f) for f in fields] for pose in poses]
+    at = 0.0
+    if "t" in present:
+        column = fields.index("t")
+        at = round(min(row[column] for row in rows if row[column] is not None), 3)
+        for row in rows:
+            if row[column] is not None:
+                row[column] = round((row[column] - at) * 1000)
+    tick = {"type": TICK, "at": at, "fields": fields, "rows": rows}
+    return json.dumps(tick, allow_nan=False, separators=(",", ":"))
+
+
+def decode(message: dict) -> list[dict]:
+    """The poses of a fleet.poses message as encode() sends it, one dict each (what static/fleet/live.js does)."""
+    fields, at = message.get("fields") or [], message.get("at") or 0.0
+    poses = []
+    for row in message.get("rows") or []:
+        pose = {f: value for f, value in zip(fields, row, strict=False) if value is not None}
+        if "t" in pose:
+            pose["t"] = at + pose["t"] / 1000
+        poses.append(pose)
+    return poses
 
 
 def _strict(pose) -> bool:
@@ -61,8 +105,8 @@ class _Socket:
         self.waiting: dict[int, dict] = {}  # robot id -> latest pose, merged while a send is under way
 
 
-class PoseFanout:
-    """One reader of the poses group for this event loop; subscribe() the sockets that show poses.
+class GroupReader:
+    """The one member of a channel-layer group for this event loop; subclasses say what a message becomes.
 
     A socket's connect never waits on Redis here: subscribing only starts the reader when none runs, and the
     reader joins the group, reads, and leaves the group by itself. (A connect once waited on a lock held across
@@ -71,23 +115,22 @@ class PoseFanout:
 
     LEAVE_S = 2.0  # how long the last socket out waits for the reader to leave the group
 
-    def __init__(self, layer) -> None:
-        self.layer = layer
-        self.sockets: dict[object, _Socket] = {}
+    def __init__(self, layer, group: str) -> None:
+        self.layer, self.group = layer, group
+        self.sockets: dict = {}  # consumer -> what the subclass keeps for it
         self.reader: asyncio.Task | None = None
 
     @classmethod
-    def of(cls, layer) -> PoseFanout:
-        """This event loop's fanout (a web process has one loop; tests may run several in turn)."""
-        loop = asyncio.get_running_loop()
-        fanout = _fanouts.get(loop)
-        if fanout is None or fanout.layer is not layer:
-            fanout = _fanouts[loop] = cls(layer)
-        return fanout
+    def of(cls, layer, group: str):
+        """This event loop's reader of the group (a web process has one loop; tests may run several in turn)."""
+        readers = _fanouts.setdefault(asyncio.get_running_loop(), {})
+        reader = readers.get((cls, group))
+        if reader is None or reader.layer is not layer:
+            reader = readers[(cls, group)] = cls(layer, group)
+        return reader
 
-    async def subscribe(self, consumer, robot_id: int | None = None) -> None:
-        """From now on the consumer gets every tick (or its robot's poses in each tick)."""
-        self.sockets[consumer] = _Socket(consumer, robot_id)
+    def _add(self, consumer, kept) -> None:
+        self.sockets[consumer] = kept
         if self.reader is None or self.reader.done():
             self.reader = asyncio.ensure_future(self._read())
 
@@ -99,6 +142,9 @@ class PoseFanout:
         reader, self.reader = self.reader, None
         reader.cancel()
         await asyncio.wait({reader}, timeout=self.LEAVE_S)
+
+    def take(self, message: dict) -> None:
+        raise NotImplementedError
 
     async def _read(self) -> None:
         # the layer's default prefix: channels_redis reads a process's channels of one prefix together
@@ -116,27 +162,45 @@ class PoseFanout:
                     message = await self.layer.receive(channel)
                 except asyncio.CancelledError:
                     raise
-                except Exception:  # Redis lost for a moment: the ticks resume when it is back
-                    log.exception("pose fanout: reading the poses group failed")
+                except Exception:  # Redis lost for a moment: the pushes resume when it is back
+                    log.exception("%s fanout: reading the group failed", self.group)
                     await asyncio.sleep(1.0)
                     continue
-                if message.get("type") == TICK:
-                    self.deliver(message.get("poses") or [])
+                self.take(message)
         finally:
             with contextlib.suppress(Exception):  # Redis away: the membership lapses by itself
-                await asyncio.wait_for(self.layer.group_discard(live.POSES_GROUP, channel), self.LEAVE_S)
+                await asyncio.wait_for(self.layer.group_discard(self.group, channel), self.LEAVE_S)
 
     async def _join(self, channel: str) -> float | None:
         """Join (or renew) the group; the loop time it went through, None when Redis did not answer."""
         try:
-            await asyncio.wait_for(self.layer.group_add(live.POSES_GROUP, channel), self.LEAVE_S)
+            await asyncio.wait_for(self.layer.group_add(self.group, channel), self.LEAVE_S)
         except asyncio.CancelledError:
             raise
         except Exception:
-            log.warning("pose fanout: joining the poses group failed; trying again", exc_info=True)
+            log.warning("%s fanout: joining the group failed; trying again", self.group, exc_info=True)
             await asyncio.sleep(1.0)
             return None
         return asyncio.get_running_loop().time()
+
+
+class PoseFanout(GroupReader):
+    """The reader of the poses group; subscribe() the sockets that show poses."""
+
+    @classmethod
+    def of(cls, layer, group: str = live.POSES_GROUP) -> PoseFanout:
+        return super().of(layer, group)
+
+    def __init__(self, layer, group: str = live.POSES_GROUP) -> None:
+        super().__init__(layer, group)
+
+    async def subscribe(self, consumer, robot_id: int | None = None) -> None:
+        """From now on the consumer gets every tick (or its robot's poses in each tick)."""
+        self._add(consumer, _Socket(consumer, robot_id))
+
+    def take(self, message: dict) -> None:
+        if message.get("type") == TICK:
+            self.deliver(message.get("poses") or [])
 
     def deliver(self, poses: list) -> None:
         """Hand one tick to every socket: one encoding for all the fleet sockets that are free."""
@@ -168,3 +232,75 @@ class PoseFanout:
             log.debug("pose fanout: send failed: %s", exc)
         finally:
             socket.sending = False
+
+
+class _Queue:
+    """One subscriber of an EventFanout: its consumer, its messages not yet dispatched, and whether they wait."""
+
+    __slots__ = ("consumer", "held", "pending", "task")
+
+    def __init__(self, consumer) -> None:
+        self.consumer = consumer
+        self.held = True  # until its snapshot is out
+        self.pending: deque[dict] = deque()
+        self.task: asyncio.Task | None = None
+
+
+class EventFanout(GroupReader):
+    """The reader of one group of events (the fleet's, a robot's, the alerts'); subscribe() each page socket of
+    the group, then release() it once its snapshot is sent."""
+
+    BACKLOG = 1000  # messages a socket may be behind (the channel layer's own capacity per channel)
+    OVERFLOW_CODE = 1013  # "try again later": the page reconnects and starts from a new snapshot
+
+    async def subscribe(self, consumer) -> None:
+        """From now on the group's messages are kept for the consumer; they are dispatched once released."""
+        self._add(consumer, _Queue(consumer))
+
+    async def unsubscribe(self, consumer) -> None:
+        queue = self.sockets.get(consumer)
+        if queue is not None and queue.task is not None:
+            queue.task.cancel()  # its socket is gone: what it had not been sent yet goes with it
+        await super().unsubscribe(consumer)
+
+    def release(self, consumer) -> None:
+        """The consumer's snapshot is out: dispatch what came since it subscribed, then each message as it comes."""
+        queue = self.sockets.get(consumer)
+        if queue is not None:
+            queue.held = False
+            self._drain(queue)
+
+    def take(self, message: dict) -> None:
+        for queue in list(self.sockets.values()):
+            if len(queue.pending) >= self.BACKLOG:
+                self._overflow(queue)
+                continue
+            queue.pending.append(message)
+            self._drain(queue)
+
+    def _drain(self, queue: _Queue) -> None:
+        if not queue.held and queue.pending and (queue.task is None or queue.task.done()):
+            queue.task = asyncio.ensure_future(self._dispatch(queue))
+
+    async def _dispatch(self, queue: _Queue) -> None:
+        while queue.pending:
+            message = queue.pending.popleft()
+            try:
+                await queue.consumer.dispatch(message)
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # one handler's failure costs that message on that socket, never the rest
+                log.exception("%s fanout: a %r push failed on one socket", self.group, message.get("type"))
+
+    def _overflow(self, queue: _Queue) -> None:
+        log.warning("%s fanout: a socket %d messages behind is closed (its page reconnects)", self.group,
+                    len(queue.pending))  # fmt: skip
+        self.sockets.pop(queue.consumer, None)
+        queue.pending.clear()
+        closing = asyncio.ensure_future(queue.consumer.close(code=self.OVERFLOW_CODE))
+        closing.add_done_callback(_quiet)
+
+
+def _quiet(task: asyncio.Task) -> None:
+    if not task.cancelled() and task.exception() is not None:
+        log.debug("fanout: closing a socket failed: %r", task.exception())

@@ -14,7 +14,10 @@ import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from django.db.models import Prefetch
+
 from fleetcore import motion
+from robots.models import Binding
 
 log = logging.getLogger(__name__)
 
@@ -213,6 +216,18 @@ def _called(task: asyncio.Task) -> None:
     _pending.discard(task)
     if not task.cancelled() and task.exception() is not None:
         log.warning("a stop's service call failed: %s", task.exception())
+
+
+ROW_FIELDS = ("id", "name", "endpoint", "ros_version")  # what CommandSurface.of reads of a robot
+BINDING_FIELDS = ("id", "robot_id", "action", "target", "kind", "message_type")  # and of each of its bindings
+
+
+def surface_rows(robots, *more: str):
+    """These Robot rows with only the columns their command surfaces read (and `more`), their bindings
+    prefetched alike, unordered: a stop's targets or a press's check reads no JSON column (a robot's footprint
+    and description, a binding's candidates), which was most of the time of a fleet's first teleop presses."""
+    bindings = Binding.objects.only(*BINDING_FIELDS).order_by()
+    return robots.only(*ROW_FIELDS, *more).prefetch_related(Prefetch("bindings", queryset=bindings))
 
 
 def surfaces(robots) -> dict[int, CommandSurface]:

@@ -1,5 +1,18 @@
 // One WebSocket per page: the snapshot first, then deltas; reconnects by itself with backoff.
 
+// A tick of poses comes as rows under its fields, `t` in ms after the tick's `at` (portal/fanout.py's encode):
+// made back into one object per pose, as the handlers take them. A row that is not a list is left out.
+export function poseRows(message) {
+  const fields = Array.isArray(message.fields) ? message.fields : [];
+  const at = typeof message.at === "number" ? message.at : 0;
+  return message.rows.filter(Array.isArray).map((row) => {
+    const pose = {};
+    fields.forEach((field, i) => { if (row[i] !== null && row[i] !== undefined) pose[field] = row[i]; });
+    if (typeof pose.t === "number") pose.t = at + pose.t / 1000;
+    return pose;
+  });
+}
+
 export function connectLive(path, handlers) {
   const conn = document.getElementById("conn");
   let socket = null;
@@ -27,6 +40,7 @@ export function connectLive(path, handlers) {
       let message;
       try { message = JSON.parse(event.data); } catch (error) { console.error("live: unreadable message dropped", error); return; }
       if (!message || typeof message !== "object") return;
+      if (message.type === "fleet.poses" && Array.isArray(message.rows)) message.poses = poseRows(message);
       if (message.type === "command.result" && waiting.has(message.ref)) {
         waiting.get(message.ref)(message);
         waiting.delete(message.ref);

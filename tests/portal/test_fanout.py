@@ -29,16 +29,15 @@ class Socket:
 
     async def send(self, text_data: str) -> None:
         await self.gate.wait()
-        self.sent.append(json.loads(text_data))
+        message = json.loads(text_data)
+        self.sent.append({**message, "poses": fanout.decode(message)})
 
 
 async def test_one_encoding_per_tick_for_every_fleet_socket_and_a_slow_one_gets_the_latest_merged(
     monkeypatch,
 ):
-    encoded = []
-    monkeypatch.setattr(
-        fanout, "encode", lambda poses: encoded.append(poses) or json.dumps(live.poses(poses))
-    )
+    encoded, encode = [], fanout.encode
+    monkeypatch.setattr(fanout, "encode", lambda poses: encoded.append(poses) or encode(poses))
     hub = fanout.PoseFanout(layer=None)
     fast = [Socket() for _ in range(3)]
     slow, page = Socket(slow=True), Socket()
@@ -84,7 +83,7 @@ async def test_many_dashboards_of_one_process_make_one_member_of_the_poses_group
     batch = [pose(fleet["turtlebot"].pk, 1.5)]
     await layer.group_send(live.POSES_GROUP, live.poses(batch))
     for dashboard in dashboards:
-        assert (await dashboard.receive_json_from(timeout=5))["poses"] == batch
+        assert fanout.decode(await dashboard.receive_json_from(timeout=5)) == batch
     for dashboard in dashboards:
         await dashboard.disconnect()
     assert await members_of_this_process() == []  # the last socket out took the reader out of the group
@@ -119,7 +118,7 @@ async def test_a_tick_is_strict_json_and_a_pose_with_nan_is_left_out_not_the_tic
     hub.deliver([pose(1, 0.5), pose(2, float("nan")), pose(3, float("inf"))])
     await asyncio.sleep(0.01)
     text = fanout.encode([pose(1, 0.5), pose(2, float("nan"))])
-    assert "NaN" not in text and json.loads(text, parse_constant=pytest.fail)["poses"] == [pose(1, 0.5)]
+    assert "NaN" not in text and fanout.decode(json.loads(text, parse_constant=pytest.fail)) == [pose(1, 0.5)]
     assert [message["poses"] for message in socket.sent] == [[pose(1, 0.5)]]
 
 
@@ -132,3 +131,158 @@ async def test_the_page_sockets_and_the_api_refuse_to_write_nan():
             await consumer.encode_json({"x": float("nan")})
     with pytest.raises(ValueError, match="JSON compliant"):
         api.renderer.render(None, {"x": float("inf")}, response_status=200)
+
+
+class Consumer:
+    """A page consumer's dispatch and close, the dispatch held by an event when `slow`."""
+
+    def __init__(self, slow: bool = False) -> None:
+        self.got: list[dict] = []
+        self.closed: int | None = None
+        self.gate = asyncio.Event()
+        if not slow:
+            self.gate.set()
+
+    async def dispatch(self, message: dict) -> None:
+        await self.gate.wait()
+        self.got.append(message)
+
+    async def close(self, code: int) -> None:
+        self.closed = code
+
+
+def status(robot_id: int) -> dict:
+    return {"type": "robot.status", "id": robot_id}
+
+
+async def test_events_wait_for_the_snapshot_come_in_order_and_a_slow_socket_holds_nobody_back():
+    hub = fanout.EventFanout(layer=None, group=live.FLEET_GROUP)
+    fast, slow, new = Consumer(), Consumer(slow=True), Consumer()
+    for consumer in (fast, slow):
+        hub.sockets[consumer] = fanout._Queue(consumer)
+        hub.release(consumer)
+    hub.sockets[new] = fanout._Queue(new)  # subscribed; its snapshot is being sent
+
+    for robot_id in (1, 2, 3):
+        hub.take(status(robot_id))
+    await asyncio.sleep(0.01)
+    assert [m["id"] for m in fast.got] == [1, 2, 3]
+    assert slow.got == [] and new.got == []  # the slow one is stuck on its first; the new one is held
+    hub.release(new)  # its snapshot is out: what came meanwhile follows, in order
+    slow.gate.set()
+    await asyncio.sleep(0.01)
+    assert [m["id"] for m in new.got] == [1, 2, 3] and [m["id"] for m in slow.got] == [1, 2, 3]
+
+
+async def test_a_socket_too_far_behind_is_closed_so_that_its_page_starts_again_from_a_snapshot(monkeypatch):
+    monkeypatch.setattr(fanout.EventFanout, "BACKLOG", 3)
+    hub = fanout.EventFanout(layer=None, group=live.FLEET_GROUP)
+    fast, stuck = Consumer(), Consumer(slow=True)
+    for consumer in (fast, stuck):
+        hub.sockets[consumer] = fanout._Queue(consumer)
+        hub.release(consumer)
+    for robot_id in range(1, 7):
+        hub.take(status(robot_id))
+        await asyncio.sleep(0)
+    await asyncio.sleep(0.01)
+    assert [m["id"] for m in fast.got] == [1, 2, 3, 4, 5, 6]
+    assert stuck.closed == fanout.EventFanout.OVERFLOW_CODE and stuck not in hub.sockets
+
+
+async def test_many_dashboards_of_one_process_make_one_member_of_the_fleet_group_and_each_gets_its_pushes(
+    viewer, fleet
+):
+    dashboards = [await _connect("/ws/fleet/", viewer) for _ in range(4)]
+    for dashboard in dashboards:
+        assert (await dashboard.receive_json_from(timeout=5))["type"] == "snapshot"
+    layer = get_channel_layer()
+
+    async def members_of_this_process():  # (a server another test left behind may still be a member)
+        members = await layer.connection(layer.consistent_hash(live.FLEET_GROUP)).zrange(
+            layer._group_key(live.FLEET_GROUP), 0, -1
+        )
+        return [member for member in members if layer.client_prefix in member.decode()]
+
+    for _ in range(50):  # the reader joins in the background of the first connect
+        if await members_of_this_process():
+            break
+        await asyncio.sleep(0.02)
+    assert len(await members_of_this_process()) == 1  # the process's reader, not one member per socket
+
+    await layer.group_send(live.FLEET_GROUP, {"type": "robot.status", "id": fleet["turtlebot"].pk})
+    for dashboard in dashboards:
+        message = await dashboard.receive_json_from(timeout=5)
+        assert message == {"type": "robot.status", "id": fleet["turtlebot"].pk}
+    for dashboard in dashboards:
+        await dashboard.disconnect()
+    assert await members_of_this_process() == []  # the last socket out took the reader out of the group
+
+
+TICK = [
+    {"id": 1, "x": 1.5, "y": -2.25, "yaw": 3.1, "v": 0.2, "w": 0.0, "t": 1795852345.125, "battery": 87.5},
+    {"id": 2, "x": 0.0, "y": 0.0, "yaw": 0.0, "v": 0.0, "w": 0.5, "t": 1795852345.05, "rtt": 1.2},
+    {
+        "id": 3,
+        "fault": "x is NaN",
+        "fault_since": 1795852340.5,
+    },  # refused from its first message: no pose yet
+]
+
+
+def test_a_tick_goes_as_rows_under_its_fields_and_comes_back_as_it_was():
+    text = fanout.encode(TICK)
+    message = json.loads(text)
+    assert message["fields"] == [
+        "id",
+        "x",
+        "y",
+        "yaw",
+        "v",
+        "w",
+        "t",
+        "battery",
+        "rtt",
+        "fault",
+        "fault_since",
+    ]
+    assert message["rows"][0][:7] == [1, 1.5, -2.25, 3.1, 0.2, 0.0, 75]  # t: ms after the tick's `at`
+    fleet = [
+        {**TICK[0], "id": n, "x": 0.001 * n} for n in range(100)
+    ]  # a fleet's tick: half the text or less
+    assert len(fanout.encode(fleet)) < len(json.dumps(live.poses(fleet))) / 2
+    back = fanout.decode(message)
+    assert [{k: v for k, v in p.items() if k != "t"} for p in back] == [
+        {k: v for k, v in p.items() if k != "t"} for p in TICK
+    ]
+    assert [p.get("t") for p in back] == [
+        pytest.approx(p.get("t"), abs=1e-3) if "t" in p else None for p in TICK
+    ]
+
+
+def test_the_browser_makes_the_same_poses_of_a_tick_as_decode(tmp_path):
+    """static/fleet/live.js's poseRows, run by node on encode()'s text: the page reads what the server meant."""
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node is not installed (the browser's decoder is run by node here)")
+    live_js = Path(__file__).resolve().parents[2] / "static" / "fleet" / "live.js"
+    script = (
+        f"import {{ poseRows }} from {json.dumps(live_js.as_uri())};\n"
+        "let text = ''; process.stdin.on('data', (d) => { text += d; });\n"
+        "process.stdin.on('end', () => { console.log(JSON.stringify(poseRows(JSON.parse(text)))); });\n"
+    )
+    (tmp_path / "decode.mjs").write_text(script)
+    text = fanout.encode(TICK)
+    out = subprocess.run(
+        [node, str(tmp_path / "decode.mjs")], input=text, capture_output=True, text=True, timeout=30
+    )
+    assert out.returncode == 0, out.stderr
+    made = json.loads(out.stdout)
+    decoded = fanout.decode(json.loads(text))
+    assert len(made) == len(decoded) == 3
+    for browser, server in zip(made, decoded, strict=True):
+        assert browser.keys() == server.keys()
+        assert all(browser[k] == pytest.approx(server[k]) for k in server)

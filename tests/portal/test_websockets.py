@@ -110,6 +110,8 @@ async def test_snapshot_carries_the_holder_and_the_last_pose(viewer, operator, f
 async def test_pose_batches_reach_the_dashboard_and_the_robot_page_gets_only_its_own(viewer, fleet):
     from channels.layers import get_channel_layer
 
+    from portal.fanout import decode
+
     turtlebot, husky = fleet["turtlebot"], fleet["husky"]
     dashboard = await _connect("/ws/fleet/", viewer)
     page = await _connect(f"/ws/robots/{husky.pk}/", viewer)
@@ -120,8 +122,8 @@ async def test_pose_batches_reach_the_dashboard_and_the_robot_page_gets_only_its
         {"id": husky.pk, "x": 2.0, "y": 2.0, "yaw": 0.0, "v": 0.5, "w": 0.0, "t": 1.0},
     ]
     await get_channel_layer().group_send(live.POSES_GROUP, live.poses(batch))
-    assert (await dashboard.receive_json_from(timeout=5))["poses"] == batch
-    assert (await page.receive_json_from(timeout=5))["poses"] == [batch[1]]
+    assert decode(await dashboard.receive_json_from(timeout=5)) == batch
+    assert decode(await page.receive_json_from(timeout=5)) == [batch[1]]
     await dashboard.disconnect()
     await page.disconnect()
 

@@ -2,7 +2,16 @@
 
 import pytest
 
-from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, Call, CommandSurface, NoMoveTopic, surfaces
+from robots.commands import (
+    NAV_MOVE_BASE,
+    NAV_NAV2,
+    NAV_SIMPLE,
+    Call,
+    CommandSurface,
+    NoMoveTopic,
+    surface_rows,
+    surfaces,
+)
 from robots.models import Binding, Robot
 
 pytestmark = pytest.mark.django_db
@@ -163,3 +172,26 @@ def test_the_links_stop_socket_zeroes_a_nav2_robot_and_cancels_its_goal():
 
     assert asyncio.run(stop()) == {"zeroed": ["n2"], "missed": {}, "unknown": []}
     assert client.sent == [("publish", "/cmd_vel"), ("call", "/navigate_to_pose/_action/cancel_goal")]
+
+
+def test_surface_rows_read_no_json_column_and_no_row_twice(django_assert_num_queries):
+    """What a stop's targets and a press's check read: two queries for any number of robots, no deferred field
+    loaded afterwards (which would be one query per robot), the same surfaces as the full rows give."""
+    for i in range(5):
+        robot_with(
+            f"s{i}",
+            1,
+            move=(f"/s{i}/cmd_vel", "geometry_msgs/Twist"),
+            navigate=(f"/s{i}/goal", "geometry_msgs/PoseStamped"),
+        )
+    full = surfaces(Robot.objects.prefetch_related("bindings"))
+    with django_assert_num_queries(2) as queries:
+        rows = list(surface_rows(Robot.objects.all(), "max_linear"))
+        found = surfaces(rows)
+        limits = [row.max_linear for row in rows]
+    assert found == full and len(limits) == 5
+    assert not any(
+        column in query["sql"]
+        for query in queries.captured_queries
+        for column in ("description", "candidates")
+    )

@@ -200,3 +200,35 @@ async def test_battery_messages_reach_the_database_only_when_a_robots_charge_cha
     await asyncio.gather(*links._BATTERY_CHECKS)
     # (the checks run in threads: their order is not the messages')
     assert sorted((pk, m["percentage"]) for pk, m in checked) == [(1, 0.1), (1, 0.9), (1, 0.9), (2, 50)]
+
+
+async def test_the_stop_targets_are_rebuilt_when_a_robot_or_binding_changes_not_when_a_state_does():
+    await sync_to_async(_stop_targets_follow_their_rows)()
+
+
+def _stop_targets_follow_their_rows() -> None:
+    from robots.links import stop_targets, targets_mark
+    from robots.models import Binding
+
+    url = "ws://127.0.0.1:9091"
+    turtlebot = Robot.objects.create(name="turtlebot", model="turtlebot3_burger", endpoint=url)
+    move = Binding.objects.create(
+        robot=turtlebot, action="move", target="/cmd_vel", message_type="geometry_msgs/Twist", how="exact"
+    )
+    mark = targets_mark([url])
+    assert stop_targets([url])["turtlebot"].move_topic == "/cmd_vel"
+    # a state, a hold, last_seen: written with .update(), read by no command surface
+    Robot.objects.filter(pk=turtlebot.pk).update(state=Robot.State.MOTION, held_reason="a test's stop")
+    assert targets_mark([url]) == mark
+
+    move.target = "/renamed/cmd_vel"
+    move.save()
+    assert targets_mark([url]) != mark
+    assert stop_targets([url])["turtlebot"].move_topic == "/renamed/cmd_vel"
+
+    mark = targets_mark([url])
+    Robot.objects.create(name="husky", model="husky", endpoint=url, namespace="husky")
+    assert targets_mark([url]) != mark
+    mark = targets_mark([url])
+    turtlebot.delete()
+    assert targets_mark([url]) != mark and "turtlebot" not in stop_targets([url])
