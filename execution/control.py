@@ -15,6 +15,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 from django.core.cache import cache
+from django.db import DatabaseError
+from django.db.models import prefetch_related_objects
 from django.utils import timezone
 
 import alerts
@@ -79,6 +81,10 @@ def stop(robots, user, source: str = "console", database_fault: str | None = Non
     robots = _robots(robots)
     if user is not None:
         check_stop(user)  # held robots too: a lease never blocks a stop
+    try:  # every robot's bindings in one query, not one per robot in the zeros' threads
+        prefetch_related_objects(robots, "bindings")
+    except DatabaseError as exc:  # each robot's zero then reads its own, and says why it could not
+        log.warning("stop: bindings not read at once: %s", exc)
     with ThreadPoolExecutor(max_workers=min(8, max(1, len(robots)))) as pool:
         results = StopResults(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
     if database_fault:

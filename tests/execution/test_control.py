@@ -48,3 +48,18 @@ def test_teleop_and_stop_respect_leases_and_roles(turtle_world, operator, second
 def test_stop_names_unknown_robots(turtle_world, operator):
     with pytest.raises(ValueError, match="No robot named wall-e"):
         stop(["wall-e"], operator)
+
+
+def test_a_stop_reads_every_robots_bindings_in_one_query_before_its_zeros(
+    turtle_world, operator, monkeypatch
+):
+    """The zeros run in threads, each robot's surface from its bindings: read one query per robot there, a stop
+    of a hundred robots spent most of its time on them (docs/scale.md)."""
+    import execution.control as control
+    from robots.models import Robot
+
+    seen = []
+    monkeypatch.setattr(control, "publish_zero", lambda robot: seen.append(robot._prefetched_objects_cache))
+    robots = list(Robot.objects.all())  # as a page's stop passes them: rows, nothing prefetched
+    assert stop(robots, operator) == dict.fromkeys([r.name for r in robots], "stopped")
+    assert seen and all("bindings" in cache for cache in seen)
