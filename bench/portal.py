@@ -17,7 +17,7 @@ import django
 from django.core.management import call_command
 from django.test import Client
 
-from fleet import embedded_redis
+from fleet import embedded_redis, websocket
 from simworker.testing import free_port
 
 BASE_DIR = Path(__file__).resolve().parent.parent
@@ -94,6 +94,7 @@ class Portal:
             "--log-level",
             "warning",
             "--no-access-log",
+            *websocket.OPTION,
         ]
         self._spawn("web", cmd)
         deadline = time.time() + timeout

@@ -174,7 +174,20 @@ class Cluster:
         for host in ("web1", "web2"):
             web = ["--host", address(host), "--port", str(WEB_PORT), "--log-level", "warning"]
             listed.append(
-                Role(host, "web", [py, "-m", "uvicorn", "fleet.asgi:application", *web, "--no-proxy-headers"])
+                Role(
+                    host,
+                    "web",
+                    [
+                        py,
+                        "-m",
+                        "uvicorn",
+                        "fleet.asgi:application",
+                        *web,
+                        "--no-proxy-headers",
+                        "--ws",
+                        "fleet.websocket:Protocol",
+                    ],
+                )
             )
         for host in ("exec1", "exec2"):
             for n in range(1, self.executors + 1):

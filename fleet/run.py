@@ -34,7 +34,7 @@ import redis
 from redis.backoff import NoBackoff
 from redis.retry import Retry
 
-from fleet import hangwatch, runguard
+from fleet import hangwatch, runguard, websocket
 from fleet.supervision import (
     Bounds,
     Layout,
@@ -118,6 +118,7 @@ def programs(setup: Setup, python: str = sys.executable) -> list[Program]:
     sim_ports = ["--port-base", str(setup.sim_port_base)]
     web_options = ["--host", HOST, "--port", str(setup.port), "--log-level", "warning"]
     web_options += ["--timeout-graceful-shutdown", "5", "--no-proxy-headers"]  # portal/clientaddr.py decides
+    web_options += websocket.OPTION  # its compression at level 1 (fleet/websocket.py)
     listed = [
         Program("web", [python, "-m", "uvicorn", "fleet.asgi:application", *web_options], hung=QUICK),
         # The default queue (still named instructions) carries recordings and experiment runs, which wait most

@@ -84,6 +84,7 @@ def live_url(transactional_db, settings):
     import uvicorn
 
     from fleet.asgi import application
+    from fleet.websocket import Protocol
 
     # execution's Redis keys (stop flags live 10 min) must not carry over between runs that reuse robot ids
     settings.FLEET_EXEC_KEY_PREFIX = f"test:portal:{uuid.uuid4().hex[:8]}"
@@ -96,6 +97,7 @@ def live_url(transactional_db, settings):
         log_level="warning",
         lifespan="off",
         timeout_graceful_shutdown=3,
+        ws=Protocol,  # as every web server of the portal (fleet/websocket.py)
     )
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
