@@ -15,8 +15,8 @@ process, which hands what it reads to the sockets subscribed to it there:
   client costs its own encoding, never the others' rate.
 - EventFanout (every other push): each message dispatched to each subscribed consumer, in the order it came, as
   the channel layer would have (its handler by the message's type). A socket's messages wait while its
-  snapshot is being sent, and a socket more than BACKLOG messages behind is closed (its page reconnects and
-  starts again from a snapshot) rather than left showing a fleet it no longer hears about.
+  snapshot is being sent, and a socket more than BACKLOG messages behind (a client that stopped reading) is
+  closed (its page reconnects and starts again from a snapshot) rather than left holding memory for ever.
 """
 
 from __future__ import annotations
@@ -250,7 +250,11 @@ class EventFanout(GroupReader):
     """The reader of one group of events (the fleet's, a robot's, the alerts'); subscribe() each page socket of
     the group, then release() it once its snapshot is sent."""
 
-    BACKLOG = 1000  # messages a socket may be behind (the channel layer's own capacity per channel)
+    # Messages a socket may be behind before it is closed: a stuck client must not hold memory for ever, but a
+    # fleet's burst (a lease or status push for each of 1,000 robots commanded together) is no reason to close a
+    # page. At 1,000 (the channel layer's capacity per channel) such a burst closed the commanding sockets and
+    # their commands were lost (bench.cluster, 500 and 1,000 robots).
+    BACKLOG = 20_000
     OVERFLOW_CODE = 1013  # "try again later": the page reconnects and starts from a new snapshot
 
     async def subscribe(self, consumer) -> None:
