@@ -229,6 +229,8 @@ class _StrictJson(AsyncJsonWebsocketConsumer):
     async def encode_json(cls, content):
         return json.dumps(content, allow_nan=False)
 
+    _frame: list | None = None  # while dispatch_many runs: what the handlers send, to go as one frame
+
     async def dispatch(self, message):
         """Channels' dispatch without its per-message close_old_connections, a hop to the one shared sync
         thread for every frame and push. This consumer reaches the database only through
@@ -237,6 +239,29 @@ class _StrictJson(AsyncJsonWebsocketConsumer):
         if handler is None:
             raise ValueError(f"No handler for message type {message['type']}")
         await handler(message)
+
+    async def dispatch_many(self, messages: list[dict]) -> None:
+        """Pushes that came together (portal.fanout's burst): each handled as dispatch() would, and what they
+        send goes to the page as one {"type": "batch", "messages": [...]} frame, in their order."""
+        self._frame = []
+        try:
+            for message in messages:
+                try:
+                    await self.dispatch(message)
+                except Exception:  # one handler's failure costs its message only
+                    log.exception("a %r push failed on one socket", message.get("type"))
+        finally:
+            frame, self._frame = self._frame, None
+        if len(frame) == 1:
+            await self.send_json(frame[0])
+        elif frame:
+            await self.send_json({"type": "batch", "messages": frame})
+
+    async def send_json(self, content, close=False):
+        if self._frame is not None and not close:
+            self._frame.append(content)  # a burst's frame is being gathered (dispatch_many)
+            return
+        await super().send_json(content, close)
 
 
 class _PageConsumer(_StrictJson):

@@ -1,6 +1,7 @@
 // On every page: the open-alerts badge in the top bar and a toast for each new alert, live; on /alerts/ the
 // open table follows too, and operators acknowledge and resolve from it.
 import { request, toast } from "./api.js";
+import { unpack } from "./live.js";
 
 const badge = document.getElementById("alerts-badge");
 const table = document.getElementById("alerts-open");
@@ -54,22 +55,23 @@ function showInTable(alert) {
 
 const seenKinds = new Map(); // alert id -> the kind this page last showed
 
+function take(message) {
+  setCount(message.open_count);
+  if (message.type !== "alert.update") return;
+  const alert = message.alert;
+  showInTable(alert);
+  // a toast for news: a new alert, or one whose event took a turn (a stall that ended in a failure: one alert)
+  const turned = seenKinds.has(alert.id) && seenKinds.get(alert.id) !== alert.kind;
+  seenKinds.set(alert.id, alert.kind);
+  if (alert.status === "open" && (alert.count === 1 || turned)) toast(`${alert.kind_label}: ${alert.message}`, alert.severity !== "info");
+}
+
 function open() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
   const socket = new WebSocket(`${scheme}://${location.host}/ws/alerts/`);
   let delay = 1000;
   socket.addEventListener("open", () => { delay = 1000; });
-  socket.addEventListener("message", (event) => {
-    const message = JSON.parse(event.data);
-    setCount(message.open_count);
-    if (message.type !== "alert.update") return;
-    const alert = message.alert;
-    showInTable(alert);
-    // a toast for news: a new alert, or one whose event took a turn (a stall that ended in a failure: one alert)
-    const turned = seenKinds.has(alert.id) && seenKinds.get(alert.id) !== alert.kind;
-    seenKinds.set(alert.id, alert.kind);
-    if (alert.status === "open" && (alert.count === 1 || turned)) toast(`${alert.kind_label}: ${alert.message}`, alert.severity !== "info");
-  });
+  socket.addEventListener("message", (event) => { unpack(JSON.parse(event.data)).forEach(take); });
   socket.addEventListener("close", (event) => {
     if (event.code === 4401 || event.code === 4403) return;
     setTimeout(open, delay);

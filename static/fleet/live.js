@@ -13,6 +13,13 @@ export function poseRows(message) {
   });
 }
 
+// Pushes that came together arrive as one {"type": "batch", "messages": [...]} frame (portal/fanout.py): the
+// messages of a frame, in their order.
+export function unpack(message) {
+  if (message && message.type === "batch" && Array.isArray(message.messages)) return message.messages;
+  return [message];
+}
+
 export function connectLive(path, handlers) {
   const conn = document.getElementById("conn");
   let socket = null;
@@ -27,6 +34,19 @@ export function connectLive(path, handlers) {
     conn.textContent = text;
   }
 
+  // one message that cannot be read or handled costs itself only, never the page's later messages
+  function handle(message) {
+    if (!message || typeof message !== "object") return;
+    if (message.type === "fleet.poses" && Array.isArray(message.rows)) message.poses = poseRows(message);
+    if (message.type === "command.result" && waiting.has(message.ref)) {
+      waiting.get(message.ref)(message);
+      waiting.delete(message.ref);
+    }
+    const handler = handlers[message.type];
+    try { if (handler) handler(message); } catch (error) { console.error(`live: ${message.type} not handled`, error); }
+    if (message.type === "snapshot") status("live", "live");
+  }
+
   function open() {
     const scheme = location.protocol === "https:" ? "wss" : "ws";
     socket = new WebSocket(`${scheme}://${location.host}${path}`);
@@ -36,18 +56,9 @@ export function connectLive(path, handlers) {
       while (pending.length) socket.send(pending.shift());
     });
     socket.addEventListener("message", (event) => {
-      // one message that cannot be read or handled costs itself only, never the page's later messages
       let message;
       try { message = JSON.parse(event.data); } catch (error) { console.error("live: unreadable message dropped", error); return; }
-      if (!message || typeof message !== "object") return;
-      if (message.type === "fleet.poses" && Array.isArray(message.rows)) message.poses = poseRows(message);
-      if (message.type === "command.result" && waiting.has(message.ref)) {
-        waiting.get(message.ref)(message);
-        waiting.delete(message.ref);
-      }
-      const handler = handlers[message.type];
-      try { if (handler) handler(message); } catch (error) { console.error(`live: ${message.type} not handled`, error); }
-      if (message.type === "snapshot") status("live", "live");
+      unpack(message).forEach(handle);
     });
     socket.addEventListener("close", (event) => {
       if (event.code === 4401) { location.href = `/login/?next=${encodeURIComponent(location.pathname)}`; return; }

@@ -260,7 +260,8 @@ def test_a_tick_goes_as_rows_under_its_fields_and_comes_back_as_it_was():
 
 
 def test_the_browser_makes_the_same_poses_of_a_tick_as_decode(tmp_path):
-    """static/fleet/live.js's poseRows, run by node on encode()'s text: the page reads what the server meant."""
+    """static/fleet/live.js's unpack and poseRows, run by node on encode()'s text: the page reads what the server
+    meant."""
     import shutil
     import subprocess
     from pathlib import Path
@@ -269,10 +270,13 @@ def test_the_browser_makes_the_same_poses_of_a_tick_as_decode(tmp_path):
     if node is None:
         pytest.skip("node is not installed (the browser's decoder is run by node here)")
     live_js = Path(__file__).resolve().parents[2] / "static" / "fleet" / "live.js"
-    script = (
-        f"import {{ poseRows }} from {json.dumps(live_js.as_uri())};\n"
+    script = (  # the tick inside a batch frame, as a burst would bring it: unpack, then poseRows
+        f"import {{ poseRows, unpack }} from {json.dumps(live_js.as_uri())};\n"
         "let text = ''; process.stdin.on('data', (d) => { text += d; });\n"
-        "process.stdin.on('end', () => { console.log(JSON.stringify(poseRows(JSON.parse(text)))); });\n"
+        "process.stdin.on('end', () => {\n"
+        "  const [tick] = unpack({ type: 'batch', messages: [JSON.parse(text)] });\n"
+        "  console.log(JSON.stringify(poseRows(tick)));\n"
+        "});\n"
     )
     (tmp_path / "decode.mjs").write_text(script)
     text = fanout.encode(TICK)
@@ -286,3 +290,71 @@ def test_the_browser_makes_the_same_poses_of_a_tick_as_decode(tmp_path):
     for browser, server in zip(made, decoded, strict=True):
         assert browser.keys() == server.keys()
         assert all(browser[k] == pytest.approx(server[k]) for k in server)
+
+
+class Bursting(Consumer):
+    """A consumer that also takes bursts (the page consumers' dispatch_many), recording each as one frame."""
+
+    def __init__(self, slow: bool = False) -> None:
+        super().__init__(slow)
+        self.frames: list[list[dict]] = []
+
+    async def dispatch(self, message: dict) -> None:
+        await super().dispatch(message)
+        self.frames.append([message])
+
+    async def dispatch_many(self, messages: list[dict]) -> None:
+        await self.gate.wait()
+        self.got.extend(messages)
+        self.frames.append(messages)
+
+
+async def test_a_socket_that_fell_behind_gets_the_backlog_in_frames_of_many_in_order(monkeypatch):
+    monkeypatch.setattr(fanout.EventFanout, "FRAME_MAX", 30)
+    hub = fanout.EventFanout(layer=None, group=live.FLEET_GROUP)
+    slow = Bursting(slow=True)
+    hub.sockets[slow] = fanout._Queue(slow)
+    hub.release(slow)
+    for robot_id in range(1, 51):  # a fleet-wide push, all of it come before the socket's turn to send
+        hub.take(status(robot_id))
+    slow.gate.set()
+    await asyncio.sleep(0.01)
+    assert [m["id"] for m in slow.got] == list(range(1, 51))
+    assert [len(frame) for frame in slow.frames] == [30, 20]  # frames of FRAME_MAX at most
+    hub.take(status(51))
+    await asyncio.sleep(0.01)
+    assert slow.frames[-1] == [status(51)]  # one push alone: dispatched alone, as always
+
+
+async def test_a_page_consumer_sends_a_burst_as_one_batch_frame_and_a_bad_push_costs_only_itself():
+    from portal.consumers import FleetConsumer
+
+    consumer = FleetConsumer()
+    sent = []
+
+    async def base_send(message):  # what the consumer hands to the server (channels' AsyncConsumer.send)
+        sent.append(json.loads(message["text"]))
+
+    consumer.base_send = base_send
+    pushes = [status(1), {"type": "no.such.handler"}, status(2)]
+    await consumer.dispatch_many(pushes)
+    assert sent == [{"type": "batch", "messages": [status(1), status(2)]}]
+    await consumer.send_json(status(3))  # outside a burst: a frame of its own, as always
+    assert sent[-1] == status(3)
+
+
+async def test_a_socket_gone_under_its_pushes_is_dropped_quietly_and_the_others_go_on(caplog):
+    class Gone(Consumer):
+        async def dispatch(self, message: dict) -> None:
+            raise ConnectionResetError("the client went away")  # as uvicorn's ClientDisconnected (an OSError)
+
+    hub = fanout.EventFanout(layer=None, group=live.FLEET_GROUP)
+    gone, fine = Gone(), Consumer()
+    for consumer in (gone, fine):
+        hub.sockets[consumer] = fanout._Queue(consumer)
+        hub.release(consumer)
+    for robot_id in (1, 2, 3):
+        hub.take(status(robot_id))
+    await asyncio.sleep(0.01)
+    assert [m["id"] for m in fine.got] == [1, 2, 3]
+    assert not hub.sockets[gone].pending and "Traceback" not in caplog.text
