@@ -62,23 +62,29 @@ async def test_one_encoding_per_tick_for_every_fleet_socket_and_a_slow_one_gets_
     assert [message["poses"] for message in slow.sent] == [ticks[0], [pose(1, 0.3), pose(2, 0.3)]]
 
 
+async def members_of_this_process(group: str) -> list[bytes]:
+    """This process's members of a channel-layer group (a server another test left behind may still be one)."""
+    layer = get_channel_layer()
+    members = await layer.connection(layer.consistent_hash(group)).zrange(layer._group_key(group), 0, -1)
+    return [member for member in members if layer.client_prefix in member.decode()]
+
+
+async def one_member_of(group: str) -> bool:
+    """Whether this process joined the group with one member only (its reader joins in the background of the
+    first connect)."""
+    for _ in range(50):
+        if await members_of_this_process(group):
+            break
+        await asyncio.sleep(0.02)
+    return len(await members_of_this_process(group)) == 1
+
+
 async def test_many_dashboards_of_one_process_make_one_member_of_the_poses_group(viewer, fleet):
     dashboards = [await _connect("/ws/fleet/", viewer) for _ in range(4)]
     for dashboard in dashboards:
         await dashboard.receive_json_from(timeout=5)
     layer = get_channel_layer()
-
-    async def members_of_this_process():  # (a server another test left behind may still be a member)
-        members = await layer.connection(layer.consistent_hash(live.POSES_GROUP)).zrange(
-            layer._group_key(live.POSES_GROUP), 0, -1
-        )
-        return [member for member in members if layer.client_prefix in member.decode()]
-
-    for _ in range(50):  # the reader joins in the background of the first connect
-        if await members_of_this_process():
-            break
-        await asyncio.sleep(0.02)
-    assert len(await members_of_this_process()) == 1  # the process's fanout, not one member per socket
+    assert await one_member_of(live.POSES_GROUP)  # the process's fanout, not one member per socket
 
     batch = [pose(fleet["turtlebot"].pk, 1.5)]
     await layer.group_send(live.POSES_GROUP, live.poses(batch))
@@ -86,7 +92,7 @@ async def test_many_dashboards_of_one_process_make_one_member_of_the_poses_group
         assert fanout.decode(await dashboard.receive_json_from(timeout=5)) == batch
     for dashboard in dashboards:
         await dashboard.disconnect()
-    assert await members_of_this_process() == []  # the last socket out took the reader out of the group
+    assert await members_of_this_process(live.POSES_GROUP) == []  # the last one out took the reader out
 
 
 async def test_a_socket_takes_commands_while_joining_the_poses_group_hangs(viewer, fleet, monkeypatch):
@@ -196,18 +202,7 @@ async def test_many_dashboards_of_one_process_make_one_member_of_the_fleet_group
     for dashboard in dashboards:
         assert (await dashboard.receive_json_from(timeout=5))["type"] == "snapshot"
     layer = get_channel_layer()
-
-    async def members_of_this_process():  # (a server another test left behind may still be a member)
-        members = await layer.connection(layer.consistent_hash(live.FLEET_GROUP)).zrange(
-            layer._group_key(live.FLEET_GROUP), 0, -1
-        )
-        return [member for member in members if layer.client_prefix in member.decode()]
-
-    for _ in range(50):  # the reader joins in the background of the first connect
-        if await members_of_this_process():
-            break
-        await asyncio.sleep(0.02)
-    assert len(await members_of_this_process()) == 1  # the process's reader, not one member per socket
+    assert await one_member_of(live.FLEET_GROUP)  # the process's reader, not one member per socket
 
     await layer.group_send(live.FLEET_GROUP, {"type": "robot.status", "id": fleet["turtlebot"].pk})
     for dashboard in dashboards:
@@ -215,81 +210,7 @@ async def test_many_dashboards_of_one_process_make_one_member_of_the_fleet_group
         assert message == {"type": "robot.status", "id": fleet["turtlebot"].pk}
     for dashboard in dashboards:
         await dashboard.disconnect()
-    assert await members_of_this_process() == []  # the last socket out took the reader out of the group
-
-
-TICK = [
-    {"id": 1, "x": 1.5, "y": -2.25, "yaw": 3.1, "v": 0.2, "w": 0.0, "t": 1795852345.125, "battery": 87.5},
-    {"id": 2, "x": 0.0, "y": 0.0, "yaw": 0.0, "v": 0.0, "w": 0.5, "t": 1795852345.05, "rtt": 1.2},
-    {
-        "id": 3,
-        "fault": "x is NaN",
-        "fault_since": 1795852340.5,
-    },  # refused from its first message: no pose yet
-]
-
-
-def test_a_tick_goes_as_rows_under_its_fields_and_comes_back_as_it_was():
-    text = fanout.encode(TICK)
-    message = json.loads(text)
-    assert message["fields"] == [
-        "id",
-        "x",
-        "y",
-        "yaw",
-        "v",
-        "w",
-        "t",
-        "battery",
-        "rtt",
-        "fault",
-        "fault_since",
-    ]
-    assert message["rows"][0][:7] == [1, 1.5, -2.25, 3.1, 0.2, 0.0, 75]  # t: ms after the tick's `at`
-    fleet = [
-        {**TICK[0], "id": n, "x": 0.001 * n} for n in range(100)
-    ]  # a fleet's tick: half the text or less
-    assert len(fanout.encode(fleet)) < len(json.dumps(live.poses(fleet))) / 2
-    back = fanout.decode(message)
-    assert [{k: v for k, v in p.items() if k != "t"} for p in back] == [
-        {k: v for k, v in p.items() if k != "t"} for p in TICK
-    ]
-    assert [p.get("t") for p in back] == [
-        pytest.approx(p.get("t"), abs=1e-3) if "t" in p else None for p in TICK
-    ]
-
-
-def test_the_browser_makes_the_same_poses_of_a_tick_as_decode(tmp_path):
-    """static/fleet/live.js's unpack and poseRows, run by node on encode()'s text: the page reads what the server
-    meant."""
-    import shutil
-    import subprocess
-    from pathlib import Path
-
-    node = shutil.which("node")
-    if node is None:
-        pytest.skip("node is not installed (the browser's decoder is run by node here)")
-    live_js = Path(__file__).resolve().parents[2] / "static" / "fleet" / "live.js"
-    script = (  # the tick inside a batch frame, as a burst would bring it: unpack, then poseRows
-        f"import {{ poseRows, unpack }} from {json.dumps(live_js.as_uri())};\n"
-        "let text = ''; process.stdin.on('data', (d) => { text += d; });\n"
-        "process.stdin.on('end', () => {\n"
-        "  const [tick] = unpack({ type: 'batch', messages: [JSON.parse(text)] });\n"
-        "  console.log(JSON.stringify(poseRows(tick)));\n"
-        "});\n"
-    )
-    (tmp_path / "decode.mjs").write_text(script)
-    text = fanout.encode(TICK)
-    out = subprocess.run(
-        [node, str(tmp_path / "decode.mjs")], input=text, capture_output=True, text=True, timeout=30
-    )
-    assert out.returncode == 0, out.stderr
-    made = json.loads(out.stdout)
-    decoded = fanout.decode(json.loads(text))
-    assert len(made) == len(decoded) == 3
-    for browser, server in zip(made, decoded, strict=True):
-        assert browser.keys() == server.keys()
-        assert all(browser[k] == pytest.approx(server[k]) for k in server)
+    assert await members_of_this_process(live.FLEET_GROUP) == []  # the last one out took the reader out
 
 
 class Bursting(Consumer):
