@@ -71,7 +71,7 @@ class HeldTeleop:
             try:
                 grant = await self._check(content.get("robot"))
             except Exception as exc:  # refused (the checks audited it), or no such robot: said in words
-                await self.send_json({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
+                await self._answer({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
                 return
             self.grants[grant.robot_id] = grant
             if self.rechecking is None or self.rechecking.done():
@@ -80,14 +80,22 @@ class HeldTeleop:
             v, w = await self.control.publish_teleop(grant, linear, angular)
         except Exception as exc:  # the link went down under the grant: said in words, grant dropped
             self.drop(grant.robot_id)
-            await self.send_json({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
+            await self._answer({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
             return
         self.used.add(grant.robot_id)
         if self.audited.get(grant.robot_id) != (v, w):
             self.audited[grant.robot_id] = (v, w)
             self._audit(grant.robot_name, v, w)
         detail = f"{grant.robot_name}: linear {v:.2f} m/s, angular {w:.2f} rad/s"
-        await self.send_json({**reply, "ok": True, "detail": detail})
+        await self._answer({**reply, "ok": True, "detail": detail})
+
+    async def _answer(self, reply: dict) -> None:
+        """Say a press's outcome on the page's socket; a socket closed meanwhile (the page went away while its
+        presses were under way: uvicorn's ClientDisconnected is an OSError) is no error, the command went out."""
+        try:
+            await self.send_json(reply)
+        except OSError as exc:
+            log.debug("teleop: the page went away before its answer: %r", exc)
 
     async def _check(self, robot_id):
         """A press's checks; presses that come together (a whole fleet's) are checked in one thread call."""
@@ -136,7 +144,7 @@ class HeldTeleop:
                 if isinstance(grant, Exception):
                     self.grants.pop(robot_id, None)
                     reply = {"type": "command.result", "command": "teleop", "ref": None, "ok": False}
-                    await self.send_json({**reply, "detail": str(grant)})
+                    await self._answer({**reply, "detail": str(grant)})
                 else:
                     self.grants[robot_id] = grant
 
