@@ -22,6 +22,7 @@ process, which hands what it reads to the sockets subscribed to it there:
 
 from __future__ import annotations
 
+import abc
 import asyncio
 import contextlib
 import json
@@ -106,7 +107,7 @@ class _Socket:
         self.waiting: dict[int, dict] = {}  # robot id -> latest pose, merged while a send is under way
 
 
-class GroupReader:
+class GroupReader(abc.ABC):
     """The one member of a channel-layer group for this event loop; subclasses say what a message becomes.
 
     A socket's connect never waits on Redis here: subscribing only starts the reader when none runs, and the
@@ -144,8 +145,9 @@ class GroupReader:
         reader.cancel()
         await asyncio.wait({reader}, timeout=self.LEAVE_S)
 
+    @abc.abstractmethod
     def take(self, message: dict) -> None:
-        raise NotImplementedError
+        """What one message read from the group becomes (on the loop, never waiting)."""
 
     async def _read(self) -> None:
         # the layer's default prefix: channels_redis reads a process's channels of one prefix together
