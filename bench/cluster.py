@@ -12,6 +12,7 @@ itself (the bridge's 10.77.0.1), measures what issue 19 sets goals for:
 - commands: every robot turned by teleop over the dashboard's socket (/ws/fleet/, alternately on web1 and web2),
   `rounds` times, all robots moving; latency = the command sent -> the same command (its angular speed) seen on the
   robot's cmd_vel at its shard (subscribed over the shard's rosbridge, so one relay hop more than the robot has).
+  Counted at the end of the run: a command seen after its round's ROUND_WAIT_S is `late`, one never seen `missing`.
 - stop-all: the dashboard's STOP ({"command": "stop"} with every robot) while all turn -> the first zero Twist at
   each robot; p99 over robots and the time to the last robot, per trial.
 - live: `clients` browser-like WebSocket clients (logged in by cookie, half on each web host) reading
@@ -45,6 +46,7 @@ from deploy.cluster_client import Portal
 from experiments.stats import summarize
 from portal.fanout import decode
 
+ROUND_WAIT_S = 5.0  # a round's commands not all seen by then: the next round goes (those are late, not lost)
 DECODED = 5  # dashboards that decode every pose (robots seen, staleness); the rest count poses per batch
 LIVE_S = 12.0  # seconds the dashboards read poses, while every robot turns
 OUT = Path(__file__).resolve().parent / "results" / "cluster"
@@ -73,41 +75,109 @@ def cpu_seconds() -> dict[str, float]:
 
 
 class Reception:
-    """Every Twist each robot's cmd_vel carried, with the time it reached us, from the shards' rosbridge."""
+    """Every Twist each robot's cmd_vel carried, with the time it reached us, from the shards' rosbridge.
+
+    Runs in a process of its own (`start`), so that neither the bench's commanders nor the dashboards' frames keep
+    it from reading: a simulator cuts off a client that stops reading for simworker.connection.STALL_SECONDS, and
+    every command after that would be unseen, not lost. A link that drops anyway is reconnected and resubscribed;
+    the time without a link is kept (`gaps`) and reported with the figures, so an unseen command is told apart
+    from a missing one. The bench asks it over a pipe: first(name, since, angular) for many robots in one call."""
 
     def __init__(self, shards: dict[str, list[str]]) -> None:
         self.shards = shards
         self.times: dict[str, list[tuple[float, float]]] = defaultdict(list)  # name -> (t, angular z)
-        self.ready = asyncio.Event()
-        self._subscribed = 0
+        self.gaps: list[dict] = []  # {"shard", "lost_at", "back_at"}: time with no link to a shard
+        self._process = None
+        self._pipe = None
 
-    async def run(self, stop: asyncio.Event) -> None:
-        await asyncio.gather(*(self._follow(url, names, stop) for url, names in self.shards.items()))
+    # the bench's side
+    def start(self) -> None:
+        """The process, subscribed to every robot's cmd_vel (waits until it says so)."""
+        self._pipe, theirs = multiprocessing.Pipe()
+        self._process = multiprocessing.get_context("spawn").Process(
+            target=_receive, args=(self.shards, theirs), name="reception", daemon=True
+        )
+        self._process.start()
+        if not self._pipe.poll(60) or self._pipe.recv() != "ready":
+            raise RuntimeError("bench.cluster: the cmd_vel reception did not subscribe within 60 s")
 
-    async def _follow(self, url: str, names: list[str], stop: asyncio.Event) -> None:
-        async with websockets.connect(url, max_size=None) as ws:
-            for name in names:
-                message = {"op": "subscribe", "topic": f"/{name}/cmd_vel", "type": "geometry_msgs/Twist"}
-                await ws.send(json.dumps(message))
-            self._subscribed += 1
-            if self._subscribed == len(self.shards):
-                self.ready.set()
-            while not stop.is_set():
-                try:
-                    raw = await asyncio.wait_for(ws.recv(), 0.5)
-                except TimeoutError:
-                    continue
-                now = time.time()
-                message = json.loads(raw)
-                if message.get("op") == "publish":
-                    name = message["topic"].split("/")[1]
-                    self.times[name].append((now, float(message["msg"]["angular"]["z"])))
+    async def first_of(self, since: dict[str, float], angular: float) -> dict[str, float | None]:
+        """For each robot, when the first Twist with this angular speed since its time was seen (None: not seen)."""
+        return await asyncio.to_thread(self._ask, ("first", since, angular))
 
+    async def stop(self) -> list[dict]:
+        """End the process; the link gaps it had."""
+        gaps = await asyncio.to_thread(self._ask, ("stop",))
+        await asyncio.to_thread(self._process.join, 10)
+        return gaps
+
+    def _ask(self, request: tuple):
+        self._pipe.send(request)
+        return self._pipe.recv()
+
+    # the process's side
     def first(self, name: str, since: float, angular: float) -> float | None:
         for t, z in self.times.get(name, ()):
             if t >= since and abs(z - angular) < 1e-6:
                 return t
         return None
+
+    async def serve(self, pipe) -> None:
+        stop = asyncio.Event()
+        subscribed = [asyncio.Event() for _ in self.shards]
+        links = [
+            asyncio.create_task(self._follow(url, names, stop, ready))
+            for (url, names), ready in zip(self.shards.items(), subscribed, strict=True)
+        ]
+        await asyncio.wait_for(asyncio.gather(*(ready.wait() for ready in subscribed)), 60)
+        pipe.send("ready")
+        while True:
+            request = await asyncio.to_thread(pipe.recv)
+            if request[0] == "stop":
+                stop.set()
+                await asyncio.gather(*links, return_exceptions=True)
+                pipe.send(self.gaps)
+                return
+            _, since, angular = request
+            pipe.send({name: self.first(name, t0, angular) for name, t0 in since.items()})
+
+    async def _follow(self, url: str, names: list[str], stop: asyncio.Event, ready: asyncio.Event) -> None:
+        lost_at = None
+        while not stop.is_set():
+            try:
+                async with websockets.connect(url, max_size=None, open_timeout=10) as ws:
+                    for name in names:
+                        message = {
+                            "op": "subscribe",
+                            "topic": f"/{name}/cmd_vel",
+                            "type": "geometry_msgs/Twist",
+                        }
+                        await ws.send(json.dumps(message))
+                    ready.set()
+                    if lost_at is not None:
+                        self.gaps.append({"shard": url, "lost_at": lost_at, "back_at": time.time()})
+                        lost_at = None
+                    while not stop.is_set():
+                        try:
+                            raw = await asyncio.wait_for(ws.recv(), 0.5)
+                        except TimeoutError:
+                            continue
+                        now = time.time()
+                        message = json.loads(raw)
+                        if message.get("op") == "publish":
+                            name = message["topic"].split("/")[1]
+                            self.times[name].append((now, float(message["msg"]["angular"]["z"])))
+            except (OSError, websockets.ConnectionClosed, TimeoutError) as error:
+                if lost_at is None:
+                    lost_at = time.time()
+                    print(f"bench.cluster: cmd_vel reception lost {url}: {error!r}; reconnecting", flush=True)
+                await asyncio.sleep(0.2)
+        if lost_at is not None:
+            self.gaps.append({"shard": url, "lost_at": lost_at, "back_at": None})
+
+
+def _receive(shards: dict[str, list[str]], pipe) -> None:
+    asyncio.run(Reception(shards).serve(pipe))
 
 
 async def connect(url: str, cookie: str):
@@ -205,10 +275,8 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
     shards = {cluster.sim_url(h): cluster.shard_robots(h) for h in ("sim1", "sim2")}
     cookie = portal.session.cookies.get("sessionid")
     webs = [cluster.url("web1"), cluster.url("web2")]
-    stop = asyncio.Event()
     reception = Reception(shards)
-    listening = asyncio.create_task(reception.run(stop))
-    await asyncio.wait_for(reception.ready.wait(), 30)
+    await asyncio.to_thread(reception.start)
     commanders = [await connect(web, cookie) for web in webs]
     drains = [asyncio.create_task(drain(ws)) for ws in commanders]
     names = sorted(ids)
@@ -232,47 +300,54 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
     ready = await asyncio.to_thread(results.recv) if await asyncio.to_thread(results.poll, 150) else {}
     print(f"bench.cluster: dashboards connected: {ready}", flush=True)
     cpu_before, wall_before = cpu_seconds(), time.monotonic()
-    latencies, missing = [], 0
+    turns = []  # (angular, {name: sent at}) of each round
     for round_ in range(rounds):
         angular = round(0.3 + 0.01 * round_, 3)
         sent = await turn_all(angular)
-        deadline = time.monotonic() + 5.0  # a command later than this counts as missing
+        turns.append((angular, sent))
+        deadline = time.monotonic() + ROUND_WAIT_S  # the next round goes then, whatever has arrived
         while time.monotonic() < deadline:
             await asyncio.sleep(0.25)
-            if all(reception.first(name, t0, angular) for name, t0 in sent.items()):
+            if all((await reception.first_of(sent, angular)).values()):
                 break
         await asyncio.sleep(0.25)
-        for name, t0 in sent.items():
-            got = reception.first(name, t0, angular)
-            if got is None:
-                missing += 1
-            else:
-                latencies.append((got - t0) * 1000)
     stop_trials = []
     for _ in range(3):
         await turn_all(0.5)
         await asyncio.sleep(1.0)
         t0 = time.time()
         await commanders[0].send(json.dumps({"command": "stop", "robots": [ids[n] for n in names]}))
+        since = dict.fromkeys(names, t0)
         deadline = time.monotonic() + 5.0
-        while time.monotonic() < deadline and not all(reception.first(n, t0, 0.0) for n in names):
+        while time.monotonic() < deadline and not all((await reception.first_of(since, 0.0)).values()):
             await asyncio.sleep(0.25)
-        each = [reception.first(name, t0, 0.0) for name in names]
+        each = (await reception.first_of(since, 0.0)).values()
         got = [(t - t0) * 1000 for t in each if t is not None]
         stop_trials.append({**summarize(got), "missing": len(names) - len(got)})
     cpu_after, wall = cpu_seconds(), time.monotonic() - wall_before
-    stop.set()
+    # Each round's commands as seen by the end of the run (its stop trials too): a command later than its round is
+    # late, not lost; one never seen is missing. Every round's angular speed is its own, so none is taken for
+    # another's.
+    latencies, missing = [], 0
+    for angular, sent in turns:
+        for name, got in (await reception.first_of(sent, angular)).items():
+            if got is None:
+                missing += 1
+            else:
+                latencies.append((got - sent[name]) * 1000)
+    late = sum(ms > ROUND_WAIT_S * 1000 for ms in latencies)
+    gaps = await reception.stop()
     live = await asyncio.to_thread(results.recv) if await asyncio.to_thread(results.poll, 60) else {}
     dashboards.join(10)
     for task in drains:
         task.cancel()
     for ws in commanders:
         await ws.close()
-    await asyncio.gather(listening, return_exceptions=True)
     cpu = {host: round((cpu_after[host] - cpu_before.get(host, 0.0)) / wall, 3) for host in cpu_after}
     stop_each = [trial["max"] for trial in stop_trials if trial["max"] is not None]
     return {
-        "commands": {**summarize(latencies), "missing": missing, "rounds": rounds},
+        "commands": {**summarize(latencies), "missing": missing, "late": late, "rounds": rounds},
+        "reception_gaps": gaps,  # time the bench's cmd_vel watcher had no link to a shard (its commands unseen)
         "stop_all_ms": {
             "trials": stop_trials,
             "p99_over_robots": max((t["p99"] for t in stop_trials if t["p99"] is not None), default=None),

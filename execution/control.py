@@ -280,6 +280,11 @@ async def publish_teleop(grant: TeleopGrant, linear: float, angular: float) -> t
     return v, w
 
 
+def link_idle(endpoint: str) -> bool:
+    """Whether publish_teleop to this endpoint would go out now: its link on this loop up and not backed up."""
+    return links.idle(endpoint)
+
+
 def teleop(robot, user, linear: float, angular: float) -> tuple[float, float]:
     """Publish one velocity command within the robot's limits; return what was sent.
 

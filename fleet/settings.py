@@ -264,7 +264,8 @@ FLEET_STOP_SOCKET = VAR_DIR / "proc" / "stop.sock"
 FLEET_ROBOT_MAX_FRAME_MB = env_int("FLEET_ROBOT_MAX_FRAME_MB", 16, minimum=1)
 FLEET_ROBOT_MAX_TOPICS = env_int("FLEET_ROBOT_MAX_TOPICS", 100_000, minimum=1)
 FLEET_ROBOT_MAX_URDF_MB = env_int("FLEET_ROBOT_MAX_URDF_MB", 4, minimum=1)
-# inbound frames per endpoint link and second; beyond it they are dropped, counted, the robot flagged, an alert raised
+# inbound frames per endpoint link and second beyond twice what its throttled subscriptions ask for; beyond that
+# they are dropped, counted, the robot flagged, an alert raised (robots/rosbridge/inflow.py)
 FLEET_ROBOT_MAX_FRAMES_PER_S = env_int("FLEET_ROBOT_MAX_FRAMES_PER_S", 2000, minimum=10)
 # a whole endpoint's discovery (an endpoint with hundreds of namespaced robots takes longer than the default)
 FLEET_DISCOVERY_TIMEOUT_S = env_int("FLEET_DISCOVERY_TIMEOUT_S", 15, minimum=1, maximum=3600)

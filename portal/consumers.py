@@ -401,7 +401,7 @@ class _PageConsumer(_StrictJson):
             return
         if getattr(self, "teleop", None) is None:
             self.teleop = HeldTeleop(user, self.send_json, checked_teleops, _control())
-        self.teleop.take(content, linear, angular)
+        await self.teleop.take(content, linear, angular)
 
     async def changed(self, event):
         """A robot's lease or state changed: forward it, and re-check its teleop before the next repeat."""

@@ -8,8 +8,9 @@ are untrusted input"), and each refusal names the setting to raise:
   link on a bigger frame: websockets reads the length first, so the frame is never held in memory);
 - topics: the topics one endpoint lists (its robots' graphs are stored and shown, row by row);
 - urdf_bytes: one robot_description (parsed as XML into memory);
-- frames_per_s: inbound frames per endpoint link and second (a token bucket holding one second's worth; what
-  exceeds it is dropped unread and counted, so one flooding endpoint cannot starve the others' links).
+- frames_per_s: inbound frames per endpoint link and second beyond what the link's throttled subscriptions ask
+  for (robots.rosbridge.inflow: a token bucket holding one second's worth; what exceeds it is dropped unread and
+  counted, so one flooding endpoint cannot starve the others' links).
 
 The process-wide values are set once from Django settings (robots.apps.RobotsConfig.ready) and again when a
 test overrides a setting; every RosbridgeClient and every registration reads them through current().

@@ -6,7 +6,10 @@ subscription's throttle and queue_length act as rosbridge's subscription modifie
 subscription_modifiers.py: a throttle alone drops what comes before its interval ends; a throttle with a
 queue_length keeps the newest queue_length messages and lets one go each interval; a queue_length alone bounds
 what waits to be sent), and a client that accepts no data for STALL_SECONDS is cut off, so a client that never reads loses
-messages without slowing anyone else. Incoming publishes spend a token bucket of FLOOD_RATE a second.
+messages without slowing anyone else. Incoming publishes spend a token bucket of FLOOD_RATE a second and
+PER_TOPIC_RATE more for each topic the endpoint takes commands on: rosbridge itself drops no publish, and one
+client (the portal's link to a shard) may command 500 robots at once, a held button's 5 Hz each and a stop-all's
+zeros on top; a bound fixed per client would drop those, where it is meant for a client flooding a topic.
 """
 
 from __future__ import annotations
@@ -26,7 +29,8 @@ log = logging.getLogger("simworker.server")  # one endpoint's lines under one na
 
 SEND_QUEUE = 1000  # messages waiting for one client; older ones are dropped beyond this
 STALL_SECONDS = 5.0  # a client that accepts no data for this long is disconnected
-FLOOD_RATE = 2000.0  # publish ops per second per client before the excess is dropped
+FLOOD_RATE = 2000.0  # publish ops per second per client before the excess is dropped, and
+PER_TOPIC_RATE = 50.0  # more for each topic the endpoint takes (a controller's 50 Hz on each robot's cmd_vel)
 WRITE_BATCH = 256  # frames joined into one socket write
 
 
@@ -78,8 +82,9 @@ class Subscription:
 class Client:
     """One WebSocket connection: its subscriptions, advertisements and bounded send queue."""
 
-    def __init__(self, ws: ServerConnection) -> None:
+    def __init__(self, ws: ServerConnection, topics: int = 0) -> None:
         self.ws = ws
+        self.flood_rate = FLOOD_RATE + PER_TOPIC_RATE * topics  # topics: those the endpoint takes publishes on
         self.id = uuid.uuid4()  # rosbridge names clients by a uuid in its log lines
         self.fragment_size: int | None = None  # set by any incoming message carrying fragment_size
         self.queue: deque[tuple[str | bytes | list[str], Subscription | None]] = deque()
@@ -87,7 +92,7 @@ class Client:
         self.subs: dict[str, Subscription] = {}
         self.adverts: dict[str, set] = {}
         self.dropped = 0
-        self.tokens, self.token_time = FLOOD_RATE, time.monotonic()
+        self.tokens, self.token_time = self.flood_rate, time.monotonic()
         self.connected_at = time.time()
         self.provided: set[str] = set()  # services this client advertised
         self.pending: dict[str, asyncio.Future] = {}  # forwarded calls awaiting its service_response
@@ -148,7 +153,7 @@ class Client:
     def allow(self) -> bool:
         """Spend one token of the incoming-rate budget; False when flooding."""
         now = time.monotonic()
-        self.tokens = min(FLOOD_RATE, self.tokens + (now - self.token_time) * FLOOD_RATE)
+        self.tokens = min(self.flood_rate, self.tokens + (now - self.token_time) * self.flood_rate)
         self.token_time = now
         if self.tokens < 1:
             return False

@@ -143,7 +143,7 @@ class RosbridgeServer:
 
     # ----- connections -----
     async def _handle(self, ws: ServerConnection) -> None:
-        client = Client(ws)
+        client = Client(ws, topics=len(self.graph.topic_handlers))
         self.clients.add(client)
         self._client_topics()
         writer = asyncio.create_task(client.writer())

@@ -50,6 +50,7 @@ class Subscription:
     type: str
     callback: Callable[[dict], None]
     message: dict
+    hz: float = 0.0  # what its throttle lets through at most; 0: no fixed rate
 
     @property
     def id(self) -> str:
@@ -92,6 +93,7 @@ class RosbridgeClient:
         call_timeout: float = 3.0,
         reconnect: bool = False,
         ping_interval: float | None = 5.0,
+        ping_timeout: float | None = None,  # None: the interval
         min_backoff: float = 0.1,
         max_backoff: float = 1.6,
         max_frame_bytes: int | None = None,
@@ -100,6 +102,7 @@ class RosbridgeClient:
         self.max_frame_bytes = max_frame_bytes or limits.current().frame_bytes
         self.connect_timeout, self.call_timeout = connect_timeout, call_timeout
         self.reconnect, self.ping_interval = reconnect, ping_interval
+        self.ping_timeout = ping_interval if ping_timeout is None else ping_timeout
         self.min_backoff, self.max_backoff = min_backoff, max_backoff
         self.last_error = ""
         # True once a rosbridge op arrived (even a bad one): something that speaks rosbridge is there
@@ -131,6 +134,12 @@ class RosbridgeClient:
     @property
     def is_connected(self) -> bool:
         return self._ws is not None
+
+    @property
+    def idle(self) -> bool:
+        """Connected, with nothing of ours still waiting to be written: a send now goes out at once."""
+        ws = self._ws
+        return ws is not None and not ws.transport.get_write_buffer_size()
 
     @property
     def closed(self) -> bool:
@@ -211,7 +220,7 @@ class RosbridgeClient:
                 max_size=self.max_frame_bytes,
                 max_queue=MAX_QUEUE,
                 ping_interval=self.ping_interval,
-                ping_timeout=self.ping_interval,
+                ping_timeout=self.ping_timeout,
                 close_timeout=1.0,
             )
         except (InvalidURI, ValueError):  # ValueError: a port outside 0-65535
@@ -416,9 +425,14 @@ class RosbridgeClient:
     ) -> Subscription:
         """Subscribe; the subscription is renewed after every reconnection."""
         sub = Subscription(
-            topic, type_, callback, codec.subscribe(self._ids, topic, type_, throttle_rate, queue_length)
+            topic,
+            type_,
+            callback,
+            codec.subscribe(self._ids, topic, type_, throttle_rate, queue_length),
+            hz=1000.0 / throttle_rate if throttle_rate > 0 else 0.0,
         )
         self._topics.setdefault(topic, []).append(sub)
+        self.inflow.expect(sub.hz)  # what we asked for is no flood
         if self._ws is not None or not self.reconnect:
             await self._send(sub.message)
         return sub
@@ -427,6 +441,7 @@ class RosbridgeClient:
         subs = self._topics.get(sub.topic, [])
         if sub in subs:
             subs.remove(sub)
+            self.inflow.expect(-sub.hz)
             if not subs:
                 self._topics.pop(sub.topic, None)
             if self._ws is not None:

@@ -14,6 +14,11 @@ import weakref
 from robots.rosbridge.client import RosbridgeClient
 from robots.rosbridge.errors import LinkDown
 
+# A pong later than this drops the link, and every command queued on it. Not the interval (2 s): a web process
+# taking a whole fleet's presses at once, on a loaded machine, answered its pings 2 s late and lost its links to
+# the shards with the commands on them (1,000 robots, bench.cluster). Whether an endpoint is up is the links
+# process's to say (robots.links, a 1 s ping); here a late pong only costs the wait.
+PING_TIMEOUT_S = 10.0
 _LOOPS: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, dict[str, RosbridgeClient]] = (
     weakref.WeakKeyDictionary()
 )
@@ -24,9 +29,17 @@ async def get(url: str) -> RosbridgeClient:
     clients = _LOOPS.setdefault(asyncio.get_running_loop(), {})
     link = clients.get(url)
     if link is None:  # set before the first await: concurrent callers share one client
-        link = clients[url] = RosbridgeClient(url, reconnect=True, ping_interval=2.0)
+        link = clients[url] = RosbridgeClient(
+            url, reconnect=True, ping_interval=2.0, ping_timeout=PING_TIMEOUT_S
+        )
         await link.start()
     return link
+
+
+def idle(url: str) -> bool:
+    """Whether the running loop's link to url is up with nothing waiting to be written (RosbridgeClient.idle)."""
+    link = _LOOPS.get(asyncio.get_running_loop(), {}).get(url)
+    return link is not None and link.idle
 
 
 async def drop(url: str) -> None:

@@ -27,6 +27,11 @@ class Control:
     def audit_teleops(self, user, batch) -> None:
         pass
 
+    def link_idle(self, endpoint) -> bool:
+        return self.idle
+
+    idle = True
+
     def teleop_grants(self, robot_ids, user):
         return checks(user, robot_ids)
 
@@ -47,9 +52,30 @@ async def test_a_press_answered_on_a_socket_closed_meanwhile_still_goes_out_and_
     loop.set_exception_handler(lambda _loop, context: failures.append(context))
     control = Control()
     teleop = HeldTeleop(None, closed, checks, control)
-    teleop.take({"robot": 7}, 0.2, 0.0)
-    teleop.take({"robot": 7}, 0.3, 0.1)
+    await teleop.take({"robot": 7}, 0.2, 0.0)  # checked first: queued while the checks run
+    await teleop.take({"robot": 7}, 0.3, 0.1)  # behind it
+    await asyncio.wait_for(asyncio.gather(*teleop.chains.values()), 5)
+    await teleop.take({"robot": 7}, 0.4, 0.2)  # granted, nothing under way: published at once
+    assert control.published[-1] == (0.4, 0.2) and not teleop.chains
+    teleop.close()
+    assert control.published == [(0.2, 0.0), (0.3, 0.1), (0.4, 0.2)]  # the commands went out in order
+    assert failures == []  # no "Task exception was never retrieved"
+
+
+async def test_a_press_whose_link_is_backed_up_waits_in_its_robots_queue_not_in_the_pages_reading():
+    """The page's next frame (a STOP) is read at once: a command its link cannot take now goes in a task."""
+    sent = []
+
+    async def answer(reply):
+        sent.append(reply)
+
+    control = Control()
+    teleop = HeldTeleop(None, answer, checks, control)
+    await teleop.take({"robot": 7}, 0.2, 0.0)
+    await asyncio.wait_for(asyncio.gather(*teleop.chains.values()), 5)
+    control.idle = False  # the link is backed up (or connecting)
+    await teleop.take({"robot": 7}, 0.3, 0.0)
+    assert teleop.chains  # queued, not awaited here
     await asyncio.wait_for(asyncio.gather(*teleop.chains.values()), 5)
     teleop.close()
-    assert control.published == [(0.2, 0.0), (0.3, 0.1)]  # the commands went out in order
-    assert failures == []  # no "Task exception was never retrieved"
+    assert control.published == [(0.2, 0.0), (0.3, 0.0)] and all(r["ok"] for r in sent)

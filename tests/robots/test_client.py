@@ -139,3 +139,19 @@ async def test_a_kept_link_lets_its_loop_shut_down(endpoint):
     await asyncio.to_thread(runner.join, 5)  # asyncio.run cancels the supervisor on the way out
     assert connected == [True]
     assert not runner.is_alive(), "the reconnect loop swallowed its own cancellation"
+
+
+async def test_a_link_is_idle_only_while_connected_with_nothing_left_to_write(endpoint):
+    """What a held button's repeat asks before it publishes without a task of its own (execution.held_teleop)."""
+    ep = endpoint()
+    client = RosbridgeClient(ep.url, ping_interval=None)
+    assert not client.idle  # not connected
+    async with client:
+        assert client.idle
+        await client.publish("/cmd_vel", {"linear": {"x": 0.1}}, "geometry_msgs/Twist")
+        for _ in range(50):  # bounded: the frame leaves at once on loopback
+            if client.idle:
+                break
+            await asyncio.sleep(0.01)
+        assert client.idle
+    assert not client.idle  # closed

@@ -66,3 +66,34 @@ def test_a_link_flooded_beyond_its_rate_drops_the_excess_and_still_answers(heard
     dropped, taken, url = asyncio.run(asyncio.wait_for(main(), 20))
     assert dropped > 500 and taken > 0
     assert heard and heard[0][0] == url and heard[0][2] is True
+
+
+def test_the_rate_grows_with_what_the_throttled_subscriptions_ask_for(heard):
+    """A shard of 500 robots' odometry at 10 Hz is what the link asked for: admitted, no flood said."""
+    clock = Clock()
+    bound = inflow.Inflow("ws://shard", rate=100, clock=clock)
+    for _ in range(500):
+        bound.expect(10.0)
+    clock.now += 1.0  # a second's worth of tokens at the new rate
+    assert sum(bound.admit() for _ in range(5000)) == 5000 and not bound.flooding and heard == []
+    assert sum(bound.admit() for _ in range(100 + 2 * 5000 + 50)) <= 100 + 2 * 5000  # bounded all the same
+    assert bound.dropped > 0
+    for _ in range(500):
+        bound.expect(-10.0)  # unsubscribed: back to the setting's allowance
+    assert bound.rate == 100
+
+
+def test_a_client_counts_its_throttled_subscriptions_in_its_inflow_rate(settings):
+    settings.FLEET_ROBOT_MAX_FRAMES_PER_S = 200
+
+    async def main():
+        client = RosbridgeClient("ws://127.0.0.1:9", reconnect=True, ping_interval=None)  # never connected
+        odom = await client.subscribe("/odom", "nav_msgs/Odometry", lambda m: None, throttle_rate=100)
+        await client.subscribe(
+            "/scan", "sensor_msgs/LaserScan", lambda m: None
+        )  # no fixed rate: shares the 200
+        assert client.inflow.rate == 200 + inflow.HEADROOM * 10
+        await client.unsubscribe(odom)
+        assert client.inflow.rate == 200
+
+    asyncio.run(main())

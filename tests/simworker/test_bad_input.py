@@ -93,6 +93,17 @@ def test_a_publish_flood_is_throttled_and_others_are_still_served(world, bridge)
     assert dropped > 0
 
 
+def test_a_client_commanding_a_whole_shard_is_not_taken_for_a_flood():
+    """The portal's one link to a 500-robot endpoint: a stop-all's zeros and every held button (5 Hz) in one
+    second are not dropped; a client of a one-robot endpoint sending as many is (rosbridge drops neither: the
+    bound is the simulator's own, against a client flooding a topic)."""
+    shard = simworker.connection.Client(ws=None, topics=500)
+    one_robot = simworker.connection.Client(ws=None, topics=3)
+    burst = 500 + 5 * 500
+    assert sum(shard.allow() for _ in range(burst)) == burst
+    assert sum(one_robot.allow() for _ in range(burst)) < burst
+
+
 def raw_subscriber(url: str, subscribe: list[dict]) -> socket.socket:
     """Open a WebSocket by hand, send frames, and never read again."""
     host, port = url.removeprefix("ws://").rsplit(":", 1)
