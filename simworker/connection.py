@@ -84,7 +84,8 @@ class Client:
 
     def __init__(self, ws: ServerConnection, topics: int = 0) -> None:
         self.ws = ws
-        self.flood_rate = FLOOD_RATE + PER_TOPIC_RATE * topics  # topics: those the endpoint takes publishes on
+        # topics: those the endpoint takes publishes on
+        self.flood_rate = FLOOD_RATE + PER_TOPIC_RATE * topics
         self.id = uuid.uuid4()  # rosbridge names clients by a uuid in its log lines
         self.fragment_size: int | None = None  # set by any incoming message carrying fragment_size
         self.queue: deque[tuple[str | bytes | list[str], Subscription | None]] = deque()
