@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from django.db.models import Prefetch
+from django.db.models import Count, Max, Prefetch
 
 from fleetcore import motion
 from robots.models import Binding
@@ -228,6 +228,24 @@ def surface_rows(robots, *more: str):
     and description, a binding's candidates), which was most of the time of a fleet's first teleop presses."""
     bindings = Binding.objects.only(*BINDING_FIELDS).order_by()
     return robots.only(*ROW_FIELDS, *more).prefetch_related(Prefetch("bindings", queryset=bindings))
+
+
+def marked_rows(robots, *more: str):
+    """These Robot rows with the columns of `more` and each one's surface mark: (its updated_at, its bindings'
+    count and latest updated_at), which changes whenever anything CommandSurface.of reads of it may have (a
+    surface's fields are written by save() or registration's bulk_update, both stamping updated_at; as
+    robots.links.targets_mark, per robot). One query, no binding read: a surface built earlier is reused while
+    its robot's mark is the same (execution.control.teleop_grants re-checking a fleet's held buttons)."""
+    return (
+        robots.only(*ROW_FIELDS, "updated_at", *more)
+        .annotate(bindings_n=Count("bindings"), bindings_at=Max("bindings__updated_at"))
+        .order_by()
+    )
+
+
+def surface_mark(robot) -> tuple:
+    """A row of marked_rows: its surface mark."""
+    return (robot.updated_at, robot.bindings_n, robot.bindings_at)
 
 
 def surfaces(robots) -> dict[int, CommandSurface]:
