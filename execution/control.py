@@ -29,7 +29,7 @@ from execution.link import LinkError, publish_zero
 from execution.models import Execution
 from execution.runner import settle
 from fleetcore import faults, motion
-from robots.commands import CommandSurface, marked_rows, surface_mark, surface_rows, surfaces
+from robots.commands import CommandSurface, kept_surfaces, marked_rows
 from robots.models import Robot
 from robots.rosbridge import pool as links
 from robots.rosbridge import sync
@@ -167,7 +167,6 @@ class TeleopGrant:
     max_linear: float
     max_angular: float
     expires: float
-    mark: tuple = ()  # robots.commands.surface_mark when the surface was read: reused while it is the same
 
     @property
     def robot_id(self) -> int:
@@ -196,21 +195,17 @@ class TeleopGrant:
 GRANT_S = 1.0
 
 
-def teleop_grants(robot_ids, user, known=None) -> dict[int, TeleopGrant | Exception]:
+def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
     """Check at once that the user may drive each robot now: {robot id: its grant, or the refusal}.
 
-    A few queries whatever the number of robots, so a socket holding many buttons re-checks them cheaply:
-    `known` are the grants being renewed, whose surfaces are read again only for robots whose surface mark
-    changed (robots.commands.marked_rows); reading every robot's bindings at each re-check was most of a web
-    process's time with a fleet of 1,000 held. Refusals: ControlRefused (role, someone else's lease, a running
-    instruction), LinkError (no move topic), ValueError (no such robot).
+    Three queries whatever the number of robots, a fourth for the bindings of robots whose surface this process
+    has not read yet or that changed since (robots.commands.kept_surfaces), so a socket holding many buttons
+    checks them cheaply. Refusals: ControlRefused (role, someone else's lease, a running instruction), LinkError
+    (no move topic), ValueError (no such robot).
     """
     ids = list(dict.fromkeys(robot_ids))
-    known = known or {}
-    robots = {
-        robot.pk: robot
-        for robot in marked_rows(Robot.objects.filter(pk__in=ids), "max_linear", "max_angular")
-    }
+    rows = marked_rows(Robot.objects.filter(pk__in=ids), "max_linear", "max_angular")
+    robots = {robot.pk: robot for robot in rows}
     found = list(robots)
     held = {lease.robot_id: lease.user for lease in leases.active(found)}
     busy = dict(
@@ -218,10 +213,7 @@ def teleop_grants(robot_ids, user, known=None) -> dict[int, TeleopGrant | Except
             "robot_id", "instruction_id"
         )
     )
-    marks = {pk: surface_mark(robot) for pk, robot in robots.items()}
-    commands = {pk: known[pk].surface for pk in found if pk in known and known[pk].mark == marks[pk]}
-    if stale := [pk for pk in found if pk not in commands]:
-        commands.update(surfaces(surface_rows(Robot.objects.filter(pk__in=stale))))
+    commands = kept_surfaces(robots.values())
     expires = time.monotonic() + GRANT_S
     out: dict[int, TeleopGrant | Exception] = {}
     for pk in ids:
@@ -240,7 +232,7 @@ def teleop_grants(robot_ids, user, known=None) -> dict[int, TeleopGrant | Except
             out[pk] = LinkError(f"{robot.name}: no move topic is bound")
         else:
             out[pk] = _leased(user, robot, held.get(pk)) or TeleopGrant(
-                commands[pk], robot.max_linear, robot.max_angular, expires, marks[pk]
+                commands[pk], robot.max_linear, robot.max_angular, expires
             )
     return out
 

@@ -150,7 +150,7 @@ class HeldTeleop:
             if not self.grants:
                 break
             try:
-                fresh = await check(list(self.grants), self.user, dict(self.grants))
+                fresh = await check(list(self.grants), self.user)
             except Exception:  # the database is away: the grants run out, and commands go the full way
                 log.exception("teleop re-check failed")
                 continue

@@ -17,7 +17,7 @@ from typing import NamedTuple
 from django.db.models import Count, Max, Prefetch
 
 from fleetcore import motion
-from robots.models import Binding
+from robots.models import Binding, Robot
 
 log = logging.getLogger(__name__)
 
@@ -234,8 +234,7 @@ def marked_rows(robots, *more: str):
     """These Robot rows with the columns of `more` and each one's surface mark: (its updated_at, its bindings'
     count and latest updated_at), which changes whenever anything CommandSurface.of reads of it may have (a
     surface's fields are written by save() or registration's bulk_update, both stamping updated_at; as
-    robots.links.targets_mark, per robot). One query, no binding read: a surface built earlier is reused while
-    its robot's mark is the same (execution.control.teleop_grants re-checking a fleet's held buttons)."""
+    robots.links.targets_mark, per robot). One query, no binding read: see kept_surfaces."""
     return (
         robots.only(*ROW_FIELDS, "updated_at", *more)
         .annotate(bindings_n=Count("bindings"), bindings_at=Max("bindings__updated_at"))
@@ -243,9 +242,31 @@ def marked_rows(robots, *more: str):
     )
 
 
-def surface_mark(robot) -> tuple:
-    """A row of marked_rows: its surface mark."""
-    return (robot.updated_at, robot.bindings_n, robot.bindings_at)
+_KEPT: dict[
+    int, tuple[tuple, CommandSurface]
+] = {}  # robot id -> (its mark, its surface) read in this process
+
+
+def kept_surfaces(rows) -> dict[int, CommandSurface]:
+    """{robot id: surface} for rows of marked_rows: the surface this process read before while the robot's mark is
+    the same, read again (its bindings, one query for all) for the others. A teleop press's checks run for every
+    robot of a fleet pressed anew (a button released for half a second is pressed anew), and reading 1,000 robots'
+    bindings each time was most of a web process's time (docs/scale.md)."""
+    rows = list(rows)
+    out, stale = {}, []
+    for robot in rows:
+        mark = (robot.updated_at, robot.bindings_n, robot.bindings_at)
+        kept = _KEPT.get(robot.pk)
+        if kept is not None and kept[0] == mark:
+            out[robot.pk] = kept[1]
+        else:
+            stale.append((robot.pk, mark))
+    if stale:
+        marks = dict(stale)
+        for robot in surface_rows(Robot.objects.filter(pk__in=list(marks))):
+            out[robot.pk] = surface = CommandSurface.of(robot)
+            _KEPT[robot.pk] = (marks[robot.pk], surface)
+    return out
 
 
 def surfaces(robots) -> dict[int, CommandSurface]:

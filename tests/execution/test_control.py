@@ -65,8 +65,8 @@ def test_a_stop_reads_every_robots_bindings_in_one_query_before_its_zeros(
     assert seen and all("bindings" in cache for cache in seen)
 
 
-def test_a_recheck_reuses_a_surface_until_the_robot_or_a_binding_changes(turtle_world, operator):
-    """teleop_grants with the grants it renews reads no binding while nothing changed; a rebinding is seen."""
+def test_a_press_reads_no_binding_while_the_robot_and_its_bindings_are_unchanged(turtle_world, operator):
+    """teleop_grants keeps each robot's surface in the process and reads it again only when its mark changed."""
     from django.db import connection
     from django.test.utils import CaptureQueriesContext
 
@@ -75,11 +75,11 @@ def test_a_recheck_reuses_a_surface_until_the_robot_or_a_binding_changes(turtle_
     robot = turtle_world.robots["turtlebot"]
     first = teleop_grants([robot.pk], operator)[robot.pk]
     with CaptureQueriesContext(connection) as queries:
-        again = teleop_grants([robot.pk], operator, {robot.pk: first})[robot.pk]
+        again = teleop_grants([robot.pk], operator)[robot.pk]
     assert again.surface is first.surface and again.expires > first.expires
     assert not any('"robots_binding"."target"' in q["sql"] for q in queries.captured_queries)
     move = robot.bindings.get(action="move")
     move.target = "/rebound/cmd_vel"
     move.save()  # stamps updated_at, as registration's bulk_update does
-    rebound = teleop_grants([robot.pk], operator, {robot.pk: again})[robot.pk]
+    rebound = teleop_grants([robot.pk], operator)[robot.pk]
     assert rebound.surface is not again.surface and rebound.surface.move_topic == "/rebound/cmd_vel"

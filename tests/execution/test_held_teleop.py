@@ -32,7 +32,7 @@ class Control:
 
     idle = True
 
-    def teleop_grants(self, robot_ids, user, known=None):
+    def teleop_grants(self, robot_ids, user):
         return checks(user, robot_ids)
 
 

@@ -178,7 +178,7 @@ async def test_a_teleop_check_that_meets_a_database_error_is_said_in_general_wor
     operator, world, recorded_control, monkeypatch
 ):
 
-    def locked(robot_ids, user, known=None):
+    def locked(robot_ids, user):
         raise OperationalError("database is locked")
 
     monkeypatch.setattr(execution.control, "teleop_grants", staticmethod(locked))

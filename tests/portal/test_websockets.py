@@ -400,9 +400,9 @@ async def test_presses_that_come_together_are_checked_in_one_call(operator, flee
     calls = []
     real = control.teleop_grants
 
-    def teleop_grants(robot_ids, user, known=None):
+    def teleop_grants(robot_ids, user):
         calls.append(sorted(robot_ids))
-        return real(robot_ids, user, known)
+        return real(robot_ids, user)
 
     monkeypatch.setattr(control, "teleop_grants", teleop_grants)
     turtlebot, husky = fleet["turtlebot"], fleet["husky"]
