@@ -25,7 +25,7 @@ from channels.db import database_sync_to_async
 
 from execution import coordination
 from robots import commands, stopsocket
-from robots.commands import CommandSurface, surface_rows, surfaces
+from robots.commands import CommandSurface, kept_surfaces, marked_rows
 from robots.models import Robot
 from robots.rosbridge import pool, sync
 
@@ -35,8 +35,9 @@ RELOAD_S = 10.0
 
 
 def load_targets() -> dict[int, CommandSurface]:
-    """Every robot's command surface (one query for robots and bindings); robots without a move topic are left out."""
-    found = surfaces(surface_rows(Robot.objects.all()))
+    """Every robot's command surface (one query; bindings read only for robots changed since the last load,
+    robots.commands.kept_surfaces); robots without a move topic are left out."""
+    found = kept_surfaces(marked_rows(Robot.objects.all()))
     return {pk: surface for pk, surface in found.items() if surface.can_move}
 
 
