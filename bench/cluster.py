@@ -415,6 +415,12 @@ def report(out: Path = OUT) -> dict:
                 "registration_s": r["registration_s"],
                 "online_s": r["online_s"],
                 "command_ms": {"p50": r["commands"]["p50"], "p99": r["commands"]["p99"]},
+                "commands": {  # counted at the end of the run (runs before 2026-11-28 15:00 counted late as missing)
+                    "sent": r["commands"]["n"] + r["commands"]["missing"],
+                    "late": r["commands"].get("late"),
+                    "missing": r["commands"]["missing"],
+                },
+                "stop_all_missing": [t["missing"] for t in r["stop_all_ms"]["trials"]],
                 "stop_all_ms": {
                     "p99": r["stop_all_ms"]["p99_over_robots"],
                     "to_last_robot": r["stop_all_ms"]["to_last_robot_max"],
@@ -449,16 +455,19 @@ def markdown(summary: dict) -> str:
         "",
         "`python -m bench.cluster --robots N` (deploy/cluster.py). Goals are the issue's, for 1,000 robots.",
         "",
-        "| robots | registration (s) | all online (s) | command p50 / p99 (ms) | stop-all p99 / last robot (ms) "
+        "| robots | registration (s) | all online (s) | command p50 / p99 (ms) | commands late / missing "
+        "| stop-all p99 / last robot (ms) | robots a stop missed (each trial) "
         "| clients | robots seen per decoding client (min) | pose Hz per robot per client (min / p50) | staleness p99 (ms) | CPU cores "
         "| CPU ms/s per robot | load at start |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n, r in rows.items():
-        live = r["live"]
+        live, c = r["live"], r["commands"]
         lines.append(
             f"| {n} | {r['registration_s']} | {r['online_s']} | {r['command_ms']['p50']} / {r['command_ms']['p99']} "
-            f"| {r['stop_all_ms']['p99']} / {r['stop_all_ms']['to_last_robot']} | {live['clients']} "
+            f"| {c['late']} / {c['missing']} of {c['sent']} "
+            f"| {r['stop_all_ms']['p99']} / {r['stop_all_ms']['to_last_robot']} "
+            f"| {', '.join(map(str, r['stop_all_missing']))} | {live['clients']} "
             f"| {live['robots_seen_per_client_min']} | {live.get('hz_per_robot_min')} / {live['hz_per_robot_p50']} | {live['staleness_p99_ms']} "
             f"| {r['cpu_cores_total']} | {r['cpu_ms_per_s_per_robot']} | {r['load_average_at_start'][0]} |"
         )
@@ -468,7 +477,7 @@ def markdown(summary: dict) -> str:
         f"Goals (1,000 robots): registration ≤ {goals['registration_s']:g} s; 50 clients each receiving every robot "
         f"at ≥ {goals['live_hz']:g} Hz with staleness p99 ≤ {goals['staleness_p99_ms']:g} ms; command p99 ≤ "
         f"{goals['command_p99_ms']:g} ms with all moving; stop-all p99 ≤ {goals['stop_all_p99_ms']:g} ms to the "
-        "last robot.",
+        "last robot. A command seen after its round (5 s) is late, one never seen missing; a stop trial waits 5 s.",
         "",
     ]
     return "\n".join(lines)
