@@ -7,6 +7,7 @@ names each command's ability) and the robot's lease exactly as the pages' POST v
 unknown, refused or dropped message is answered with a ``command.result`` saying why, never a traceback.
 """
 
+import contextlib
 import json
 import logging
 import math
@@ -14,7 +15,9 @@ from dataclasses import dataclass
 
 from channels.consumer import get_handler_name
 from channels.db import database_sync_to_async
+from channels.exceptions import StopConsumer
 from channels.generic.websocket import AsyncJsonWebsocketConsumer
+from channels.layers import get_channel_layer
 from django.db import DatabaseError
 
 import live
@@ -230,6 +233,19 @@ class _StrictJson(AsyncJsonWebsocketConsumer):
         return json.dumps(content, allow_nan=False)
 
     _frame: list | None = None  # while dispatch_many runs: what the handlers send, to go as one frame
+
+    async def __call__(self, scope, receive, send):
+        """Channels' AsyncConsumer.__call__ without a channel of the socket's own: every push reaches a page
+        socket through its process's group readers (portal.fanout), never through a channel of its own, so each
+        socket's waiting receive on one (and channels' asyncio.wait over the two, a task and three turns of the
+        loop for every frame) was cost for nothing: a frame from the page is now read with one await and
+        dispatched, one at a time as before."""
+        self.scope = scope
+        self.channel_layer = get_channel_layer(self.channel_layer_alias)  # the group readers' layer
+        self.base_send = send
+        with contextlib.suppress(StopConsumer):
+            while True:
+                await self.dispatch(await receive())
 
     async def dispatch(self, message):
         """Channels' dispatch without its per-message close_old_connections, a hop to the one shared sync

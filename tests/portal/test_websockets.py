@@ -492,3 +492,31 @@ async def test_the_dashboard_watches_one_robots_scan_at_a_time(viewer, fleet, mo
     await communicator.send_json_to({"command": "watch", "robot": None})
     await communicator.disconnect()
     assert link.dropped == ["/scan", "/scan"]
+
+
+async def test_page_sockets_take_no_channel_of_their_own(viewer, fleet, monkeypatch):
+    """Every push reaches a page through its process's group readers (portal.fanout), which open the channels; a
+    second dashboard opens none (a waiting receive per socket, and a task and an asyncio.wait per frame, for
+    nothing)."""
+    from channels.layers import get_channel_layer
+
+    layer = get_channel_layer()
+    opened = []
+    real = layer.new_channel
+
+    async def new_channel(*args, **kwargs):
+        opened.append(await real(*args, **kwargs))
+        return opened[-1]
+
+    monkeypatch.setattr(layer, "new_channel", new_channel)
+    first = await _connect("/ws/fleet/", viewer)
+    assert (await first.receive_json_from(timeout=5))["type"] == "snapshot"
+    await asyncio.sleep(0.3)  # its group readers (events, poses) started
+    readers = len(opened)
+    second = await _connect("/ws/fleet/", viewer)
+    assert (await second.receive_json_from(timeout=5))["type"] == "snapshot"
+    await sync_to_async(live.robot_status)(fleet["turtlebot"])
+    assert (await second.receive_json_from(timeout=5))["type"] == "robot.status"  # pushes still arrive
+    assert readers >= 1 and len(opened) == readers
+    await first.disconnect()
+    await second.disconnect()
