@@ -40,6 +40,7 @@ from pathlib import Path
 import psutil
 import websockets
 
+from bench import frames
 from bench import report as report_file
 from deploy.cluster import Cluster, down, host_pids, reason_unavailable
 from deploy.cluster_client import Portal
@@ -157,12 +158,7 @@ class Reception:
                     if lost_at is not None:
                         self.gaps.append({"shard": url, "lost_at": lost_at, "back_at": time.time()})
                         lost_at = None
-                    while not stop.is_set():
-                        try:
-                            raw = await asyncio.wait_for(ws.recv(), 0.5)
-                        except TimeoutError:
-                            continue
-                        now = time.time()
+                    async for now, raw in frames.until(ws, stop):
                         message = json.loads(raw)
                         if message.get("op") == "publish":
                             name = message["topic"].split("/")[1]
@@ -197,11 +193,7 @@ async def browser(url: str, cookie: str, seen: dict, stale: list[float] | None, 
     socket, and one client process could not decode 50 sockets' worth of poses on this machine."""
     async with await connect(url, cookie) as ws:
         live["connected"] += 1
-        while not live["stop"].is_set():
-            try:
-                raw = await asyncio.wait_for(ws.recv(), 0.5)
-            except TimeoutError:
-                continue
+        async for now, raw in frames.until(ws, live["stop"]):
             if not live["on"] or '"fleet.poses"' not in raw:
                 continue
             if (
@@ -210,7 +202,6 @@ async def browser(url: str, cookie: str, seen: dict, stale: list[float] | None, 
                 seen["batches"] += 1
                 seen["poses"] += raw.count("],[") + 1 if '"rows":[[' in raw else 0
                 continue
-            now = time.time()
             for pose in decode(json.loads(raw)):
                 seen[pose["id"]] += 1
                 if pose.get("t"):

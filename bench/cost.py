@@ -34,7 +34,7 @@ from pathlib import Path
 import psutil
 import websockets
 
-from bench import component
+from bench import component, frames
 from bench.portal import Portal
 from fleetcore.interpretation import Interpretation
 from robots.rosbridge import RosbridgeClient
@@ -96,12 +96,10 @@ async def dashboard(
     async with websockets.connect(
         url, additional_headers=headers, max_size=None, compression=compression
     ) as ws:
-        while not stop.is_set():
-            with contextlib.suppress(TimeoutError):
-                raw = await asyncio.wait_for(ws.recv(), 0.5)
-                if '"fleet.poses"' in raw:
-                    seen["frames"] += 1
-                    seen["poses"] += len(json.loads(raw).get("rows") or [])
+        async for _, raw in frames.until(ws, stop):
+            if '"fleet.poses"' in raw:
+                seen["frames"] += 1
+                seen["poses"] += len(json.loads(raw).get("rows") or [])
 
 
 def register(url: str) -> list[dict]:
@@ -223,9 +221,9 @@ def profiles(spies: dict, top: int = 12) -> dict[str, list[str]]:
             stack, _, count = line.rpartition(" ")
             if not count.isdigit():  # py-spy's own notes ("... sends.")
                 continue
-            frames = {f.split(" (")[0] + " " + f.split("/")[-1].rstrip(")") for f in stack.split(";")}
+            functions = {f.split(" (")[0] + " " + f.split("/")[-1].rstrip(")") for f in stack.split(";")}
             total += int(count)
-            for frame in frames:
+            for frame in functions:
                 inclusive[frame] += int(count)
         out[kind] = [f"{100 * n / total:.0f}% {f}" for f, n in inclusive.most_common(top)] if total else []
     return out

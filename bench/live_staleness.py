@@ -7,11 +7,11 @@ time while it keeps real time). Run `python -m bench.live_staleness feed` as the
 import asyncio
 import json
 import sys
-import time
 
 import django
 import websockets
 
+from bench.frames import until
 from experiments.stats import summarize
 from portal.fanout import decode
 
@@ -22,12 +22,7 @@ async def client(url: str, cookie: str, origin: str, samples: list[float], stop:
     async with websockets.connect(
         url, additional_headers={"Cookie": f"sessionid={cookie}", "Origin": origin}, max_size=None
     ) as ws:
-        while not stop.is_set():
-            try:
-                raw = await asyncio.wait_for(ws.recv(), 0.5)
-            except TimeoutError:
-                continue
-            now = time.time()
+        async for now, raw in until(ws, stop):
             frames += 1
             msg = json.loads(raw)
             if msg.get("type") == "fleet.poses":
