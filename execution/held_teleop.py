@@ -6,8 +6,8 @@ A held button sends its command every 0.2 s, and a fleet page may hold many robo
   control.teleop_grants), the first commands of robots pressed together in one call; a refusal is answered
   in words and audited.
 - Under the grant this gives, commands are published with one send on this loop's own rosbridge link: no
-  thread, no database, and no task of its own when the link is idle. A robot's commands go out in the order they came; different robots' never wait for
-  each other.
+  thread, no database, and no task of its own when the link is idle. A robot's commands go out in the order
+  they came; different robots' never wait for each other.
 - A grant is dropped when the robot's lease or state changes (the pushes every page gets: drop()), and all
   grants in use are re-checked at once, in one thread call, every GRANT_S / 2; a grant not used since the
   last re-check is dropped (the button was released). A refusal found then is said to the person.

@@ -242,9 +242,8 @@ def marked_rows(robots, *more: str):
     )
 
 
-_KEPT: dict[
-    int, tuple[tuple, CommandSurface]
-] = {}  # robot id -> (its mark, its surface) read in this process
+# robot id -> (its mark, its surface) as this process read them
+_KEPT: dict[int, tuple[tuple, CommandSurface]] = {}
 
 
 def kept_surfaces(rows) -> dict[int, CommandSurface]:

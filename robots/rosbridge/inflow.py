@@ -2,9 +2,10 @@
 which frames are dropped unread and counted. The rate is the setting's allowance (limits.frames_per_s, shared by
 what the link asked for at no fixed rate: service answers, unthrottled topics) plus twice what its throttled
 subscriptions ask for (expect()): one endpoint may serve a whole simulator shard of 500 robots, whose odometry at
-10 Hz is 5,000 frames a second that the link itself asked for, and that is no flood. The queue ahead of it is websockets' own (client.MAX_QUEUE frames,
-then TCP backpressure on the sender), so a flooding endpoint costs its link's reader a bounded share of the loop
-and every other link, stop and live pose on that loop goes on as without it.
+10 Hz is 5,000 frames a second that the link itself asked for, and that is no flood. The queue ahead of it is
+websockets' own (client.MAX_QUEUE frames, then TCP backpressure on the sender), so a flooding endpoint costs its
+link's reader a bounded share of the loop and every other link, stop and live pose on that loop goes on as
+without it.
 
 A link that starts dropping tells the process's flood listeners (robots.flooding flags the robots of the endpoint
 and raises an alert), and again every REPORT_S while it goes on.
