@@ -47,12 +47,10 @@ from urllib.parse import urlparse
 
 import django
 import psycopg
-from django.core.cache import cache
 from django.core.management import call_command
 from django.db import connection, connections
 from django.utils import timezone
 
-import live
 from bench import component
 from fleet.processes import end, fleet_env, start
 from fleetcore.catalog import model
@@ -304,6 +302,7 @@ def allocation_ms(rounds: int) -> dict:
     from execution import dispatch
     from places.worlds import load_world_into_db
     from robots.models import Binding, Robot
+    from robots.poses import store_poses
 
     load_world_into_db(WORLD)
     world, rng = load_world(WORLD), random.Random(1000)
@@ -331,8 +330,8 @@ def allocation_ms(rounds: int) -> dict:
             x, y = rng.uniform(0.5, 29.5), rng.uniform(0.5, 19.5)
             if planner.free(*planner.to_cell(x, y)):
                 break
-        poses[live.POSE_CACHE_KEY.format(id=robot.pk)] = {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}
-    cache.set_many(poses, 600)
+        poses[robot.pk] = {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}
+    store_poses(list(poses.values()))
     Robot.objects.exclude(name__startswith="synthetic").update(link_status="offline")
     times = []
     for _ in range(rounds):

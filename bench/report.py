@@ -16,6 +16,7 @@ RUN_FILE = "run.json"  # the run's mode, when and how long, and its experiments 
 SUMMARY_KEYS = (
     "command_latency_ms",
     "direct_latency_ms",
+    "relay_latency_ms",
     "stop_latency_ms",
     "typed_stop_latency_ms",
     "registration_s",
@@ -87,6 +88,7 @@ def build_summary(results: dict[str, dict]) -> dict:
     summary = {
         "command_latency_ms": {n: {"p50": None, "p99": None} for n in ("1", "10", "100")},
         "direct_latency_ms": {n: {"p50": None, "p99": None} for n in ("1", "10", "100")},
+        "relay_latency_ms": {n: {"p50": None, "p99": None} for n in ("1", "10", "100")},
         "stop_latency_ms": {"p50": None, "p99": None, "robots": None, "queued": None},
         "typed_stop_latency_ms": {
             "p50": None,
@@ -219,17 +221,24 @@ def render_latency(summary: dict) -> list[str]:
     lines = [
         "## Command latency: portal against direct publish (same run)",
         "",
-        "| robots moving | direct p50 / p99 (ms) | portal p50 / p99 (ms) | ratio p50 | ratio p99 |",
-        "|---|---|---|---|---|",
+        "| robots moving | direct p50 / p99 (ms) | portal p50 / p99 (ms) | ratio p50 | ratio p99 "
+        "| bare relay p50 / p99 (ms) | relay ÷ direct p50 |",
+        "|---|---|---|---|---|---|---|",
     ]
     for n in ("1", "10", "100"):
         d, p = summary["direct_latency_ms"][n], summary["command_latency_ms"][n]
-        ratios = [_fmt(_ratio(p[k], d[k]), 1) for k in ("p50", "p99")]
+        r = summary.get("relay_latency_ms", {}).get(n, {"p50": None, "p99": None})
+        ratios = [_fmt(_ratio(p[k], d[k]), 2) for k in ("p50", "p99")]
         lines.append(
-            f"| {n} | {_fmt(d['p50'], 1)} / {_fmt(d['p99'], 1)} | {_fmt(p['p50'], 1)} / {_fmt(p['p99'], 1)} | "
+            f"| {n} | {_fmt(d['p50'], 2)} / {_fmt(d['p99'], 1)} | {_fmt(p['p50'], 2)} / {_fmt(p['p99'], 1)} | "
             + " | ".join(ratios)
-            + " |"
+            + f" | {_fmt(r['p50'], 2)} / {_fmt(r['p99'], 1)} | {_fmt(_ratio(r['p50'], d['p50']), 2)} |"
         )
+    lines += [
+        "",
+        "The bare relay (bench/relay.py) is uvicorn with the portal's WebSocket protocol and rosbridge client and "
+        "nothing else: what any process between a page and a robot costs with these libraries.",
+    ]
     stop = summary["stop_latency_ms"]
     lines += [
         "",

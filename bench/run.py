@@ -18,7 +18,7 @@ from pathlib import Path
 
 import websockets
 
-from bench import execution, report
+from bench import execution, relay, report
 from bench.hand import hand_register
 from bench.live_staleness import measure
 from bench.portal import Portal
@@ -27,7 +27,7 @@ from experiments.probe import Reception, sim_robot_link, watch_odometry
 from experiments.response import ODOM_WATCH_MAX, command_latency, robots_scale, speed_grid
 from experiments.stats import profile_calls
 from robots.rosbridge import RosbridgeClient
-from simworker.testing import running_world
+from simworker.testing import free_port, running_world
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MODES = {
@@ -229,7 +229,36 @@ class Bench:
             n: _ratio(via_portal["summary"][n]["p50"], measured["summary"][n]["p50"])
             for n in via_portal["summary"]
         }
+        try:
+            via_relay = await self.relayed_latency(links)
+        except Exception as exc:  # the floor explains the portal's figure; it is not the measurement
+            out["relay"] = f"relay not measured: {type(exc).__name__}: {exc}"
+            return out
+        out["relay"] = via_relay["detail"]
+        out["summary"]["relay_latency_ms"] = via_relay["summary"]
+        out[
+            "relay_ratio_p50"
+        ] = {  # any process in between, with the portal's libraries, over the direct path
+            n: _ratio(via_relay["summary"][n]["p50"], measured["summary"][n]["p50"])
+            for n in via_relay["summary"]
+        }
+        out["portal_over_relay_p50"] = {  # what the portal adds to that floor
+            n: _ratio(via_portal["summary"][n]["p50"], via_relay["summary"][n]["p50"])
+            for n in via_relay["summary"]
+        }
         return out
+
+    async def relayed_latency(self, links) -> dict:
+        """The command latency through a bare relay (bench.relay): the floor under the portal's hop."""
+        with relay.Relay(free_port(), os.path.join(tempfile.gettempdir(), "fleet-bench-relay.log")) as served:
+            ws = await websockets.connect(served.url, max_size=None, ping_interval=None)
+            driver = relay.RelayDriver(ws, links)
+            try:
+                return await command_latency(
+                    driver, links, self.reception, self.cfg["latency"], self.cfg["rounds"]
+                )
+            finally:
+                await driver.close()
 
     async def portal_driver(self, links) -> PortalDriver:
         """The portal's teleop over /ws/fleet/, robots registered by hand (no identification)."""

@@ -20,6 +20,7 @@ from django.db.models import prefetch_related_objects
 from django.utils import timezone
 
 import alerts
+import live
 from access import holds, leases
 from access.leases import ControlRefused, check_stop
 from audit import records as audit
@@ -89,7 +90,7 @@ def stop(robots, user, source: str = "console", database_fault: str | None = Non
         results = StopResults(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
     if database_fault:
         results.failed["the database"] = database_fault
-    with brief_lock_wait():
+    with brief_lock_wait(), live.together():  # its pushes (a status per robot) in one hand-over
         _bookkeeping(results, robots, user, source)
     return results
 
@@ -216,25 +217,27 @@ def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
     commands = kept_surfaces(robots.values())
     expires = time.monotonic() + GRANT_S
     out: dict[int, TeleopGrant | Exception] = {}
-    for pk in ids:
-        robot = robots.get(pk)
-        if robot is None:
-            out[pk] = ValueError(f"robot {pk}: no such robot")
-            continue
-        try:
-            leases.check_command(user, robot, held_by=held.get(pk))
-        except ControlRefused as exc:
-            out[pk] = exc
-            continue
-        if pk in busy:
-            out[pk] = ControlRefused(f"{robot.name} is running instruction #{busy[pk]}; stop it first.")
-        elif not commands[pk].can_move:
-            out[pk] = LinkError(f"{robot.name}: no move topic is bound")
-        else:
-            out[pk] = _leased(user, robot, held.get(pk)) or TeleopGrant(
-                commands[pk], robot.max_linear, robot.max_angular, expires
-            )
+    with live.together():  # the leases taken (a push each: a fleet's first presses) go in one message a group
+        for pk in ids:
+            out[pk] = _grant(user, robots.get(pk), pk, held, busy, commands, expires)
     return out
+
+
+def _grant(user, robot, pk, held, busy, commands, expires) -> TeleopGrant | Exception:
+    """One robot's grant of teleop_grants, or its refusal."""
+    if robot is None:
+        return ValueError(f"robot {pk}: no such robot")
+    try:
+        leases.check_command(user, robot, held_by=held.get(pk))
+    except ControlRefused as exc:
+        return exc
+    if pk in busy:
+        return ControlRefused(f"{robot.name} is running instruction #{busy[pk]}; stop it first.")
+    if not commands[pk].can_move:
+        return LinkError(f"{robot.name}: no move topic is bound")
+    return _leased(user, robot, held.get(pk)) or TeleopGrant(
+        commands[pk], robot.max_linear, robot.max_angular, expires
+    )
 
 
 def _leased(user, robot, held_by) -> ControlRefused | None:

@@ -13,6 +13,11 @@ A held button sends its command every 0.2 s, and a fleet page may hold many robo
   last re-check is dropped (the button was released). A refusal found then is said to the person.
 - A change of speed is audited after it was published, from a thread, changes that come while one write is
   under way going together in the next; a repeat is not audited.
+- Each press is answered (command.result), but after the publishes: the answers of presses read together go
+  to the page once the socket has nothing more to read, as one {"type": "batch"} frame when there are several
+  (the page reads batches: static/fleet/live.js). Answering each press before reading the next one had the
+  next robot's command wait behind an answer's encoding, compression and write (bench.run --only latency: with
+  100 robots pressed at once the portal took twice a bare relay's time per frame).
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ from collections.abc import Awaitable, Callable
 from channels.db import database_sync_to_async
 from django.utils import timezone
 
+import live
+
 log = logging.getLogger(__name__)
 
 GATHER_S = 0.002  # presses arriving within this share one check (a check takes a few ms itself)
@@ -32,7 +39,9 @@ GATHER_S = 0.002  # presses arriving within this share one check (a check takes 
 class HeldTeleop:
     """One socket's teleop: grants per robot, per-robot ordered publishing, re-checks and write-behind audit."""
 
-    def __init__(self, user, send_json: Callable[[dict], Awaitable[None]], checks, control) -> None:
+    def __init__(
+        self, user, send_json: Callable[[dict], Awaitable[None]], checks, control, stops: set | None = None
+    ) -> None:
         self.user, self.send_json = user, send_json
         self.checks = checks  # (user, robot ids) -> {id: grant, or the refusal}, in a thread
         self.control = control  # execution.control: teleop_grants, publish_teleop, audit_teleops, GRANT_S
@@ -42,9 +51,16 @@ class HeldTeleop:
         self.chains: dict[object, asyncio.Future] = {}
         self.unaudited: list[tuple] = []
         self.auditing: asyncio.Task | None = None
+        self.answers: list[dict] = []  # answers not yet sent, in the order of their presses
+        self.answering: asyncio.Task | None = None
         self.rechecking: asyncio.Task | None = None
         self.wanted: dict[int, asyncio.Future] = {}  # presses waiting for their checks
         self.checking: asyncio.Task | None = None
+        # this page's stops whose bookkeeping is under way: the page socket's own set, so that its stops from
+        # before its first teleop press count too
+        self.stops: set[asyncio.Task] = set() if stops is None else stops
+        self.stop_count = 0  # stops seen; with the count at each robot's (or "all"'s) last one
+        self.last_stop: dict[object, int] = {}
 
     async def take(self, content: dict, linear: float, angular: float) -> None:
         """One command: published from here (no task: one turn of the loop less on its way) under a valid grant
@@ -62,7 +78,9 @@ class HeldTeleop:
         ):
             await self._publish(grant, content, linear, angular)
             return
-        task = asyncio.ensure_future(self._one(self.chains.get(key), content, linear, angular))
+        task = asyncio.ensure_future(
+            self._one(self.chains.get(key), content, linear, angular, self.stop_count)
+        )
         self.chains[key] = task
         task.add_done_callback(lambda done: self.chains.get(key) is done and self.chains.pop(key))
 
@@ -70,20 +88,44 @@ class HeldTeleop:
         """The robot's lease or state changed: its next command goes through the checks again."""
         self.grants.pop(robot_id, None)
 
-    def close(self) -> None:
-        for task in [*self.chains.values(), *([self.rechecking] if self.rechecking else [])]:
-            task.cancel()  # the socket that wanted these repeats is gone
+    def stopped(self, robot_ids, bookkeeping: asyncio.Task) -> None:
+        """The page stopped these robots ("all": every one), its bookkeeping (control.stop) under way. Their grants
+        go at once; a command the page sent before the STOP and not out yet is not sent after the zero; one sent
+        after it is checked once the bookkeeping is done (a person may still drive a robot a stop holds:
+        access.holds)."""
+        for robot_id in list(self.grants) if robot_ids == "all" else robot_ids:
+            self.drop(robot_id)
+        self.stop_count += 1
+        for key in ["all"] if robot_ids == "all" else robot_ids:
+            self.last_stop[key] = self.stop_count
+        self.stops.add(bookkeeping)
+        bookkeeping.add_done_callback(self.stops.discard)
 
-    async def _one(self, previous, content: dict, linear: float, angular: float) -> None:
+    def close(self) -> None:
+        for task in [*self.chains.values(), self.rechecking, self.answering]:
+            if task is not None:
+                task.cancel()  # the socket that wanted these repeats (and their answers) is gone
+
+    async def _one(self, previous, content: dict, linear: float, angular: float, stops_seen: int) -> None:
+        """One queued command (stops_seen: how many of the page's stops were read before it)."""
         if previous is not None:
             await asyncio.gather(previous, return_exceptions=True)
         grant = self.grants.get(content.get("robot"))
-        if grant is None or not grant.valid:
+        checked = grant is None or not grant.valid
+        if checked:
+            if self.stops:  # a STOP before this press: its bookkeeping first, so the checks see what it did
+                await asyncio.gather(*list(self.stops), return_exceptions=True)
             try:
                 grant = await self._check(content.get("robot"))
             except Exception as exc:  # refused (the checks audited it), or no such robot: said in words
-                await self._answer({**_reply(content), "ok": False, "detail": str(exc) or type(exc).__name__})
+                self._answer({**_reply(content), "ok": False, "detail": str(exc) or type(exc).__name__})
                 return
+        if max(self.last_stop.get(grant.robot_id, 0), self.last_stop.get("all", 0)) > stops_seen:
+            # the page's STOP was read after this command: it is not sent after the zero (nor its grant kept)
+            detail = f"{grant.robot_name}: stopped after this command was sent; not sent"
+            self._answer({**_reply(content), "ok": False, "detail": detail})
+            return
+        if checked:
             self.grants[grant.robot_id] = grant
             if self.rechecking is None or self.rechecking.done():
                 self.rechecking = asyncio.ensure_future(self._recheck())
@@ -96,22 +138,31 @@ class HeldTeleop:
             v, w = await self.control.publish_teleop(grant, linear, angular)
         except Exception as exc:  # the link went down under the grant: said in words, grant dropped
             self.drop(grant.robot_id)
-            await self._answer({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
+            self._answer({**reply, "ok": False, "detail": str(exc) or type(exc).__name__})
             return
         self.used.add(grant.robot_id)
         if self.audited.get(grant.robot_id) != (v, w):
             self.audited[grant.robot_id] = (v, w)
             self._audit(grant.robot_name, v, w)
         detail = f"{grant.robot_name}: linear {v:.2f} m/s, angular {w:.2f} rad/s"
-        await self._answer({**reply, "ok": True, "detail": detail})
+        self._answer({**reply, "ok": True, "detail": detail})
 
-    async def _answer(self, reply: dict) -> None:
-        """Say a press's outcome on the page's socket; a socket closed meanwhile (the page went away while its
-        presses were under way: uvicorn's ClientDisconnected is an OSError) is no error, the command went out."""
-        try:
-            await self.send_json(reply)
-        except OSError as exc:
-            log.debug("teleop: the page went away before its answer: %r", exc)
+    def _answer(self, reply: dict) -> None:
+        """Say a press's outcome on the page's socket, once this loop turns (see the module's docstring)."""
+        self.answers.append(reply)
+        if self.answering is None or self.answering.done():
+            self.answering = asyncio.ensure_future(self._send_answers())
+
+    async def _send_answers(self) -> None:
+        """The answers gathered so far, in one frame; a socket closed meanwhile (the page went away while its
+        presses were under way: uvicorn's ClientDisconnected is an OSError) is no error, the commands went out."""
+        while self.answers:
+            batch, self.answers = self.answers, []
+            try:
+                await self.send_json(live.page_frame(batch))
+            except OSError as exc:
+                log.debug("teleop: the page went away before %d answers: %r", len(batch), exc)
+                return
 
     async def _check(self, robot_id):
         """A press's checks; presses that come together (a whole fleet's) are checked in one thread call."""
@@ -160,7 +211,7 @@ class HeldTeleop:
                 if isinstance(grant, Exception):
                     self.grants.pop(robot_id, None)
                     reply = {"type": "command.result", "command": "teleop", "ref": None, "ok": False}
-                    await self._answer({**reply, "detail": str(grant)})
+                    self._answer({**reply, "detail": str(grant)})
                 else:
                     self.grants[robot_id] = grant
 

@@ -227,9 +227,10 @@ class Progress:
     since: float = field(default_factory=time.monotonic)
     mark: tuple | None = None
 
-    def update(self, pose) -> str | None:
-        """Take a pose; return None while fine, "stalled" or "late" (to be said by the caller)."""
-        now = time.monotonic()
+    def update(self, pose, now: float | None = None) -> str | None:
+        """Take a pose (seen at `now`, monotonic; the present by default); return None while fine, "stalled" or
+        "late" (to be said by the caller)."""
+        now = time.monotonic() if now is None else now
         if self.mark is None or self._progressed(self.mark, pose):
             self.mark, self.since = pose, now
         if now - self.started > self.limit:

@@ -7,6 +7,7 @@ import asyncio
 import json
 import time
 
+import live
 from experiments.probe import TWIST_TYPE, RobotLink, twist
 
 KEEPALIVE_S = 0.2
@@ -94,8 +95,9 @@ class PortalDriver:
         """Read everything the portal pushes, so a full socket buffer never holds the commands back."""
         async for raw in self.ws:
             msg = json.loads(raw)
-            if msg.get("type") == "command.result":
-                self.answered += 1
+            for one in live.page_messages(msg):
+                if one.get("type") == "command.result":  # a burst of presses is answered in one batch
+                    self.answered += 1
 
     async def _send(self, payload: dict) -> None:
         await self.ws.send(json.dumps(payload))

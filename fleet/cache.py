@@ -11,6 +11,11 @@ set_many writes each key with its expiry in one SET (PX), pipelined without a tr
 an MSET, then an EXPIRE per key, inside MULTI/EXEC: the pose hub stores every robot's pose ten times a second,
 and half of those commands were the EXPIREs. (Each key is still written whole; a reader sees the old value or
 the new, never a key without its expiry.)
+
+The hash methods keep many small values under one key, one field each (robots.poses: every robot's last pose), so
+that a tick of a hundred poses is one HSET, and a read of them one HMGET, where a key per value cost a SET and its
+reply each: the pose store was a third of the links process's time at 100 robots (py-spy, bench.cost). A hash
+expires as a whole: a field's own age is its owner's business.
 """
 
 from django.core.cache.backends import redis as django_redis
@@ -39,8 +44,40 @@ class RedisCacheClient(django_redis.RedisCacheClient):
             pipeline.set(key, self._serializer.dumps(value), ex=timeout)
         pipeline.execute()
 
+    def hash_set(self, key, mapping: dict, timeout) -> None:
+        pipeline = self.get_client(None, write=True).pipeline(transaction=False)
+        pipeline.hset(key, mapping={field: self._serializer.dumps(value) for field, value in mapping.items()})
+        pipeline.expire(key, timeout)
+        pipeline.execute()
+
+    def hash_get(self, key, fields: list) -> dict:
+        values = self.get_client(key).hmget(key, fields) if fields else []
+        return {
+            field: self._serializer.loads(value)
+            for field, value in zip(fields, values, strict=True)
+            if value is not None
+        }
+
+    def hash_delete(self, key, fields: list) -> None:
+        if fields:
+            self.get_client(key, write=True).hdel(key, *fields)
+
 
 class RedisCache(django_redis.RedisCache):
+    """Django's Redis cache, and values kept as fields of one hash (hash_set, hash_get, hash_delete)."""
+
     def __init__(self, server, params) -> None:
         super().__init__(server, params)
         self._class = RedisCacheClient
+
+    def hash_set(self, key: str, mapping: dict, timeout: int) -> None:
+        """Write these fields of the hash at key (their values pickled, as the cache's), which then expires in
+        timeout seconds unless written again."""
+        self._cache.hash_set(self.make_and_validate_key(key), mapping, timeout)
+
+    def hash_get(self, key: str, fields) -> dict:
+        """{field: value} of those fields of the hash at key that are there."""
+        return self._cache.hash_get(self.make_and_validate_key(key), list(fields))
+
+    def hash_delete(self, key: str, fields) -> None:
+        self._cache.hash_delete(self.make_and_validate_key(key), list(fields))

@@ -7,6 +7,10 @@ level (6) a 100-robot tick took twice level 1's time for 13 % fewer bytes (1.4 a
 
 Served by giving uvicorn `--ws fleet.websocket:Protocol` (OPTION; every command of this repository that starts a
 web server does). Only the level changes: the window sizes and the negotiation stay uvicorn's.
+
+Tried and dropped (2026-11-28): server_no_context_takeover with a tick compressed once for every socket. One
+host's bench gave the web 0.65x per dashboard, but on the cluster at 100 robots the web's CPU was no lower and the
+staleness p99 worse in four runs of four (docs/scale.md, "night").
 """
 
 from __future__ import annotations

@@ -7,6 +7,7 @@ names each command's ability) and the robot's lease exactly as the pages' POST v
 unknown, refused or dropped message is answered with a ``command.result`` saying why, never a traceback.
 """
 
+import asyncio
 import contextlib
 import json
 import logging
@@ -38,7 +39,14 @@ from robots.models import Robot
 from robots.rosbridge.errors import RosbridgeError
 
 log = logging.getLogger(__name__)
+_FINISHING: set[asyncio.Task] = set()  # commands' bookkeeping running beside their sockets' frames
 UNDERSTOOD = "_understood"  # the socket's Reading of an instruct message's text, handed on to submit
+
+
+def _finished(task: asyncio.Task) -> None:
+    _FINISHING.discard(task)
+    if not task.cancelled() and task.exception() is not None:
+        log.error("a command's bookkeeping failed", exc_info=task.exception())
 
 
 class CommandError(Exception):
@@ -250,7 +258,11 @@ class _StrictJson(AsyncJsonWebsocketConsumer):
     async def dispatch(self, message):
         """Channels' dispatch without its per-message close_old_connections, a hop to the one shared sync
         thread for every frame and push. This consumer reaches the database only through
-        database_sync_to_async, whose thread closes old connections around each call itself."""
+        database_sync_to_async, whose thread closes old connections around each call itself. A page's frame (a
+        held button's command five times a second) goes straight to receive, as websocket_receive would."""
+        if message["type"] == "websocket.receive":
+            await self.receive(text_data=message.get("text"), bytes_data=message.get("bytes"))
+            return
         handler = getattr(self, get_handler_name(message), None)
         if handler is None:
             raise ValueError(f"No handler for message type {message['type']}")
@@ -268,10 +280,8 @@ class _StrictJson(AsyncJsonWebsocketConsumer):
                     log.exception("a %r push failed on one socket", message.get("type"))
         finally:
             frame, self._frame = self._frame, None
-        if len(frame) == 1:
-            await self.send_json(frame[0])
-        elif frame:
-            await self.send_json({"type": "batch", "messages": frame})
+        if frame:
+            await self.send_json(live.page_frame(frame))
 
     async def send_json(self, content, close=False):
         if self._frame is not None and not close:
@@ -297,6 +307,7 @@ class _PageConsumer(_StrictJson):
             return
         self.may_control = self.abilities["control"]
         self.limiter = socket_input.RateLimiter()
+        self.stops_running: set[asyncio.Task] = set()  # this page's stops whose bookkeeping is under way
         if self.may_control:
             fast_stop.TARGETS.refresh()  # what a stop from this page needs, loaded before it is pressed
         if self.abilities["instruct"]:
@@ -371,29 +382,62 @@ class _PageConsumer(_StrictJson):
             except BadFrame as exc:
                 await self.refuse(content, str(exc))
                 return
-            await fast_stop.stop_now(ids)  # a head start; run_command below checks, stops again, answers
+            await fast_stop.stop_now(ids)  # a head start; run_command checks, stops again, answers
+            self.stopping(user, content, ids)
+            return
         if content.get("command") == "instruct" and self.abilities["instruct"]:
-            content = await self.typed_stop_head_start(content)
+            content, stopped = await self.typed_stop_head_start(content)
+            if stopped is not None:  # a typed stop, its zeros out: stored (submit) as a STOP's bookkeeping is
+                self.stopping(user, content, stopped)
+                return
+        if self.stops_running:  # what the page sent after a stop comes after it: never cancelled by it
+            await asyncio.gather(*self.stops_running, return_exceptions=True)
+        await self.run_and_answer(user, content)
+
+    async def run_and_answer(self, user, content) -> None:
+        """Run the command (control's checks, in a thread) and answer it on the socket."""
         # Not thread-sensitive: one socket's commands do not wait behind every other socket's.
         reply = await database_sync_to_async(run_command, thread_sensitive=False)(user, content)
-        await self.send_json(reply)
+        try:
+            await self.send_json(reply)
+        except OSError as exc:  # the page went away meanwhile (uvicorn's ClientDisconnected): it was run
+            log.debug("a command's answer found its page gone: %r", exc)
 
-    async def typed_stop_head_start(self, content: dict) -> dict:
+    def stopping(self, user, content, robot_ids) -> None:
+        """A stop's bookkeeping (flags, second zeros, queues, leases, audit; a typed stop's instruction too) beside
+        the socket's frames, its zeros already out: it takes seconds for a large fleet, and the page's next frame,
+        a STOP above all, must not wait behind it. What the page sends next, but a stop, waits for it."""
+        self.stops_running.add(task := self.finishing(self.run_and_answer(user, content)))
+        task.add_done_callback(self.stops_running.discard)
+        if getattr(self, "teleop", None) is not None:
+            self.teleop.stopped(robot_ids, task)  # no press read before the stop goes out after its zero
+
+    def finishing(self, work) -> asyncio.Task:
+        """Run work beside the socket's frames, kept until it ends (a closed page does not cut it short)."""
+        task = asyncio.ensure_future(work)
+        _FINISHING.add(task)
+        task.add_done_callback(_finished)
+        return task
+
+    async def typed_stop_head_start(self, content: dict) -> tuple[dict, list[int] | str | None]:
         """The typed text read once: a "stop ..." gets flags and zeros from this loop, as the STOP button's, before
-        submit writes anything; the message goes on with what was understood (submit does not read it again)."""
+        submit writes anything. Returns the message with what was understood (submit does not read it again) and,
+        for a stop, the robots it stops (ids, or "all"); None for anything else."""
         text = content.get("text")
         if not isinstance(text, str) or not text.strip() or len(text) > 2000:
-            return content  # command_instruct refuses it in words
+            return content, None  # command_instruct refuses it in words
         try:
             reading = await database_sync_to_async(understand, thread_sensitive=False)(text)
         except (
             Exception
         ):  # the database or the ontology: submit reads it again and says what failed, in words
             log.exception("reading %r for a stop's head start failed", text[:80])
-            return content
+            return content, None
+        stopped = None
         if reading.stops is not None:
-            await fast_stop.stop_now(fast_stop.TARGETS.ids(reading.stops))
-        return {**content, UNDERSTOOD: reading}
+            stopped = fast_stop.TARGETS.ids(reading.stops)
+            await fast_stop.stop_now(stopped)
+        return {**content, UNDERSTOOD: reading}, stopped
 
     async def watch(self, content) -> None:
         """Follow one robot's scan on this page's map ({"command": "watch", "robot": id or null})."""
@@ -416,7 +460,7 @@ class _PageConsumer(_StrictJson):
             await self.refuse(content, str(exc))
             return
         if getattr(self, "teleop", None) is None:
-            self.teleop = HeldTeleop(user, self.send_json, checked_teleops, _control())
+            self.teleop = HeldTeleop(user, self.send_json, checked_teleops, _control(), self.stops_running)
         await self.teleop.take(content, linear, angular)
 
     async def changed(self, event):

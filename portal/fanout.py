@@ -169,7 +169,8 @@ class GroupReader(abc.ABC):
                     log.exception("%s fanout: reading the group failed", self.group)
                     await asyncio.sleep(1.0)
                     continue
-                self.take(message)
+                for one in live.unbatched(message):  # a together() block's pushes come in one message
+                    self.take(one)
         finally:
             with contextlib.suppress(Exception):  # Redis away: the membership lapses by itself
                 await asyncio.wait_for(self.layer.group_discard(self.group, channel), self.LEAVE_S)

@@ -2,17 +2,16 @@
 
 import time
 
-from django.core.cache import cache
 from django.db.models import prefetch_related_objects
 from django.utils import timezone
 
-import live
 from access.models import ControlLease
 from alerts import service
 from alerts.models import Alert
 from execution import queues, traffic_state
 from execution.models import Execution, Instruction
 from robots.models import Robot
+from robots.poses import kept_poses
 
 
 def _robot_row(robot, holders: dict, current: dict, goals: dict, cached: dict) -> dict:
@@ -34,7 +33,7 @@ def _robot_row(robot, holders: dict, current: dict, goals: dict, cached: dict) -
         "stop_hold": robot.hold_words,  # "held by a stop (admin, 10:43:44)": nothing automatic moves it
         "instruction": current.get(robot.pk),
         "goal": goals.get(robot.pk),
-        "pose": cached.get(live.POSE_CACHE_KEY.format(id=robot.pk)),
+        "pose": cached.get(robot.pk),
     }
 
 
@@ -49,7 +48,7 @@ def robot_rows(robots) -> list[dict]:
     holders = {pk: (name, until.isoformat()) for pk, name, until in leases}
     current, goals = Execution.objects.current_work(ids)
     try:
-        cached = cache.get_many([live.POSE_CACHE_KEY.format(id=pk) for pk in ids])
+        cached = kept_poses(ids)
     except Exception:  # a missing cache only costs the first tick of poses
         cached = {}
     rows = [_robot_row(robot, holders, current, goals, cached) for robot in robots]

@@ -40,6 +40,12 @@ def decode(text_data: str | None, bytes_data: bytes | None) -> dict:
 
 def _depth(value) -> int:
     """How deeply lists and objects nest (iteratively: a hostile frame cannot exhaust the stack)."""
+    if isinstance(value, dict):  # a held button's command, every 0.2 s: one object of plain values
+        for child in value.values():
+            if isinstance(child, (dict, list)):
+                break
+        else:
+            return 1
     deepest, todo = 0, [(value, 1)]
     while todo:
         item, depth = todo.pop()

@@ -116,7 +116,8 @@ async def record(
                 message = await asyncio.wait_for(layer.receive(channel), timeout=min(left, 1.0))
             except TimeoutError:
                 continue
-            await _write(writer, message, names)
+            for one in live.unbatched(message):  # a together() block's pushes come in one message
+                await _write(writer, one, names)
     finally:
         for group in groups:
             await layer.group_discard(group, channel)

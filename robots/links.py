@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import math
 from collections.abc import Awaitable, Callable, Iterable
@@ -88,7 +89,14 @@ def paid_zero(robot_ids) -> None:
 
 
 def set_link_status(url: str, up: bool, reason: str = "") -> list[str]:
-    """Write the endpoint's robots' link status, push and alert each change; return the robots changed."""
+    """Write the endpoint's robots' link status, push and alert each change; return the robots changed. The
+    pushes (a status and an alert per robot: 1,000 when a 500-robot endpoint comes up) go at the end, each
+    group's in one message (live.together)."""
+    with live.together():
+        return _set_link_status(url, up, reason)
+
+
+def _set_link_status(url: str, up: bool, reason: str) -> list[str]:
     close_old_connections()
     status = Robot.Link.ONLINE if up else Robot.Link.OFFLINE
     now = timezone.now()
@@ -213,22 +221,29 @@ class LinkManager:
             writer.cancel()
 
     async def _tick(self) -> None:
-        """Add links for new endpoints (each on its own: one that fails does not stop the rest), touch the online."""
-        wanted = self.fixed if self.fixed is not None else await sync_to_async(registered_endpoints)()
-        for url in wanted:
-            if url not in self.links:
-                try:
-                    await self.add(url)
-                except Exception:
-                    log.exception("%s: could not start its link", url)
+        """Add links for new endpoints (together, each on its own: one that fails or is slow does not hold the
+        rest), touch the online, refresh the stop targets. The reads are not made on Django's shared sync thread,
+        where the link status writes queue (a save, an alert and a push per robot: seconds for an endpoint of
+        500 robots on a busy machine); in one 1,000-robot run the second shard's link never came up while they
+        ran (docs/scale.md, "2026-11-29"). The touch, a write, stays there (SQLite, `make run`'s default, takes
+        one writer at a time)."""
+        off_thread = functools.partial(sync_to_async, thread_sensitive=False)
+        wanted = self.fixed if self.fixed is not None else await off_thread(registered_endpoints)()
+        await asyncio.gather(*(self._add_logged(url) for url in wanted if url not in self.links))
         online = [u for u, c in self.links.items() if c.is_connected]
         await sync_to_async(touch)(online)
-        mark = await sync_to_async(targets_mark)(list(self.links))
+        mark = await off_thread(targets_mark)(list(self.links))
         if (
             mark != self.targets_mark
         ):  # (building every robot's surface each round was a sixth of this process)
-            self.targets = await sync_to_async(stop_targets)(list(self.links))
+            self.targets = await off_thread(stop_targets)(list(self.links))
             self.targets_mark = mark
+
+    async def _add_logged(self, url: str) -> None:
+        try:
+            await self.add(url)
+        except Exception:
+            log.exception("%s: could not start its link", url)
 
     async def zero(self, names: list[str] | str) -> dict:
         """Publish the zero of each named robot ("all": every one) on its link, all at once, from memory (no
@@ -267,7 +282,8 @@ class LinkManager:
 
     async def add(self, url: str) -> RosbridgeClient:
         """Open a link to url and run the hooks on it (robots read first: if that fails, the next round retries)."""
-        robots = await sync_to_async(endpoint_robots)(url) if self.hooks else []
+        # not on Django's shared sync thread, where the link status writes (a push per robot) queue
+        robots = await sync_to_async(endpoint_robots, thread_sensitive=False)(url) if self.hooks else []
         client = RosbridgeClient(url, reconnect=True, ping_interval=1.0, max_backoff=1.6)
         client.on_link(lambda up, reason, url=url: self._changed(url, up, reason))
         self.links[url] = client

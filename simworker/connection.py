@@ -28,6 +28,7 @@ from simworker import outgoing
 log = logging.getLogger("simworker.server")  # one endpoint's lines under one name, as rosbridge logs them
 
 SEND_QUEUE = 1000  # messages waiting for one client; older ones are dropped beyond this
+OVERFLOW_LOG_EVERY = 1000  # a client's first message dropped so is logged, then one line per this many
 STALL_SECONDS = 5.0  # a client that accepts no data for this long is disconnected
 FLOOD_RATE = 2000.0  # publish ops per second per client before the excess is dropped, and
 PER_TOPIC_RATE = 50.0  # more for each topic the endpoint takes (a controller's 50 Hz on each robot's cmd_vel)
@@ -93,6 +94,7 @@ class Client:
         self.subs: dict[str, Subscription] = {}
         self.adverts: dict[str, set] = {}
         self.dropped = 0
+        self.overflowed = 0  # of those, dropped because the send queue was full (the client reads too slowly)
         self.tokens, self.token_time = self.flood_rate, time.monotonic()
         self.connected_at = time.time()
         self.provided: set[str] = set()  # services this client advertised
@@ -147,7 +149,13 @@ class Client:
             _old, old_sub = self.queue.popleft()
             if old_sub is not None:
                 old_sub.queued -= 1
+            self.overflowed += 1
             self.dropped += 1
+            if self.overflowed == 1 or self.overflowed % OVERFLOW_LOG_EVERY == 0:
+                # said, not silent: a client reading too slowly loses messages it asked for (a watcher that
+                # counts them as never sent would be misled; the operator of a slow console should know)
+                log.warning("[Client %s] send queue full (%d messages): the oldest dropped, %d so far",
+                            self.id, SEND_QUEUE, self.overflowed)  # fmt: skip
         self.queue.append((text, sub))
         self.wake.set()
 

@@ -95,9 +95,12 @@ def cancel_action_goal(goal_id: str, action: str) -> dict:
     return {"op": "cancel_action_goal", "id": goal_id, "action": action}
 
 
+_COMPACT = json.JSONEncoder(separators=(",", ":"))  # json.dumps with separators builds an encoder per call
+
+
 def encode(message: dict) -> str:
     """Encode one frame as compact JSON text."""
-    return json.dumps(message, separators=(",", ":"))
+    return _COMPACT.encode(message)
 
 
 def decode(raw: str | bytes) -> dict:

@@ -73,19 +73,22 @@ def test_latency_why_is_empty_when_the_goals_are_met_and_names_the_cost_otherwis
     assert "2.5 ms" in text and "400.0 ms" in text
 
 
-def test_the_latency_section_shows_both_paths_and_their_ratio():
+def test_the_latency_section_shows_both_paths_the_bare_relay_and_their_ratios():
     summary = report.build_summary(
         {
             "latency": {
                 "summary": {
                     "direct_latency_ms": {"1": {"p50": 2.0, "p99": 4.0}},
                     "command_latency_ms": {"1": {"p50": 10.0, "p99": 40.0}},
+                    "relay_latency_ms": {"1": {"p50": 3.0, "p99": 6.0}},
                     "stop_latency_ms": {"p50": 30.0, "p99": 60.0, "robots": 5, "queued": 90},
                 }
             }
         }
     )
     text = "\n".join(report.render_latency(summary))
-    assert "| 1 | 2.0 / 4.0 | 10.0 / 40.0 | 5.0 | 10.0 |" in text
-    assert "| 100 | – / – | – / – | – | – |" in text
+    assert (
+        "| 1 | 2.00 / 4.0 | 10.00 / 40.0 | 5.00 | 10.00 | 3.00 / 6.0 | 1.50 |" in text
+    )  # and the bare relay's
+    assert "| 100 | – / – | – / – | – | – | – / – | – |" in text
     assert "90 instructions still queued" in text

@@ -4,15 +4,14 @@ when nobody is free; goals taken by another robot become the nearest free spot, 
 import math
 
 import pytest
-from django.core.cache import cache
 
-import live
 from execution import dispatch, scheduler
 from execution.instructions import submit
 from execution.models import Execution, Instruction
 from fleetcore.traffic import SPOT_MARGIN
 from places.worlds import load_world_into_db
 from robots.models import Binding, Robot
+from robots.poses import forget_poses, store_poses
 from tests.execution.helpers import parse, step
 
 SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
@@ -32,12 +31,12 @@ def fleet(db):
         )
         for role in roles:
             Binding.objects.create(robot=robot, action=role, target=f"/{name}/{role}")
-        cache.set(live.POSE_CACHE_KEY.format(id=robot.pk), {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}, 60)
+        store_poses([{"id": robot.pk, "x": x, "y": y, "yaw": 0.0}])
         made.append(robot)
         return robot
 
     yield add
-    cache.delete_many([live.POSE_CACHE_KEY.format(id=robot.pk) for robot in made])
+    forget_poses([robot.pk for robot in made])
 
 
 @pytest.fixture
@@ -195,7 +194,7 @@ def test_a_robot_whose_pose_was_never_kept_is_given_a_spot_on_the_side_it_starts
     the robot that held the doorway: it could never get there.)"""
     fleet("parked", 3.0, 4.6, footprint=HUSKY)  # in Room 1's doorway (its door faces west)
     tb = fleet("tb", -2.0, -0.5)
-    cache.delete(live.POSE_CACHE_KEY.format(id=tb.pk))
+    forget_poses([tb.pk])
     Robot.objects.filter(pk=tb.pk).update(start_pose=[-2.0, -0.5, 0.0])
     instruction = submit("move tb to parked", fleet_admin, parse=parse(step(["tb"], 3.0, 4.6, "parked")))
     goal = Execution.objects.get(instruction=instruction).steps[0]["destination"]
@@ -280,17 +279,14 @@ def test_robots_sent_again_to_the_place_they_stand_round_stay_where_they_stand(
     for execution in Execution.objects.filter(instruction=first):  # each arrives at its goal
         goal = execution.steps[0]["destination"]
         goals[execution.robot.name] = (goal["x"], goal["y"])
-        key = live.POSE_CACHE_KEY.format(id=execution.robot.pk)
-        cache.set(key, {"id": execution.robot.pk, "x": goal["x"], "y": goal["y"], "yaw": 0.0}, 60)
+        store_poses([{"id": execution.robot.pk, "x": goal["x"], "y": goal["y"], "yaw": 0.0}])
     Execution.objects.filter(instruction=first).update(status="succeeded")
     again = submit(text, fleet_admin, parse=parsed)
     for execution in Execution.objects.filter(instruction=again):
         goal = execution.steps[0]["destination"]
         assert math.dist((goal["x"], goal["y"]), goals[execution.robot.name]) < 1e-3, execution.robot.name
     assert "goes to a free spot" not in again.outcome and "stays where it stands" in again.outcome
-    cache.set(
-        live.POSE_CACHE_KEY.format(id=robots[2].pk), {"id": robots[2].pk, "x": 5.5, "y": 1.0, "yaw": 0.0}, 60
-    )
+    store_poses([{"id": robots[2].pk, "x": 5.5, "y": 1.0, "yaw": 0.0}])
     Execution.objects.filter(instruction=again).update(status="succeeded")
     alone = submit("move tb05 to Cross", fleet_admin, parse=parse(step(["tb05"], 15.0, 12.0, "Cross")))
     goal = Execution.objects.get(instruction=alone).steps[0]["destination"]

@@ -2,7 +2,6 @@
 
 import asyncio
 import math
-import time
 from types import SimpleNamespace
 
 import pytest
@@ -51,23 +50,23 @@ def test_without_blocked_detection_only_the_time_limit_ends_it():
 
 
 def test_progress_is_getting_closer_or_turning_towards_the_goal():
-    progress = Progress(limit=60.0, window=0.05, goal=(1.0, 0.0))
-    assert progress.update((0.0, 0.0, 3.0)) is None  # facing away
-    time.sleep(0.03)
-    assert progress.update((0.0, 0.0, 2.0)) is None  # turning towards it: progress
-    time.sleep(0.03)
-    assert progress.update((0.1, 0.0, 0.0)) is None  # closer: progress
-    time.sleep(0.03)
-    assert progress.update((0.1, 0.01, 0.0)) is None  # a little sideways: not progress, but within the window
-    time.sleep(0.04)
-    assert progress.update((0.1, -0.01, 0.01)) == "stalled"  # wiggling in place for longer than the window
+    # The clock is given, not slept: a loaded machine must not stretch 30 ms past the window.
+    progress = Progress(limit=60.0, window=0.05, goal=(1.0, 0.0), started=0.0, since=0.0)
+    assert progress.update((0.0, 0.0, 3.0), now=0.0) is None  # facing away
+    assert progress.update((0.0, 0.0, 2.0), now=0.03) is None  # turning towards it: progress
+    assert progress.update((0.1, 0.0, 0.0), now=0.06) is None  # closer: progress
+    assert (
+        progress.update((0.1, 0.01, 0.0), now=0.09) is None
+    )  # a little sideways: not progress, within the window
+    assert (
+        progress.update((0.1, -0.01, 0.01), now=0.13) == "stalled"
+    )  # wiggling in place longer than the window
 
 
 def test_a_motion_is_late_after_its_limit_even_with_progress():
-    progress = Progress(limit=0.05, window=10.0, goal=(10.0, 0.0))
-    assert progress.update((0.0, 0.0, 0.0)) is None
-    time.sleep(0.06)
-    assert progress.update((1.0, 0.0, 0.0)) == "late"
+    progress = Progress(limit=0.05, window=10.0, goal=(10.0, 0.0), started=0.0, since=0.0)
+    assert progress.update((0.0, 0.0, 0.0), now=0.0) is None
+    assert progress.update((1.0, 0.0, 0.0), now=0.06) == "late"
 
 
 @pytest.mark.slow

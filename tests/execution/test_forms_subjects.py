@@ -2,9 +2,7 @@
 the real interpreter's steps planned by dispatch over robots with poses; no simulator (nothing is run)."""
 
 import pytest
-from django.core.cache import cache
 
-import live
 from execution import dispatch, queries
 from execution.instructions import submit
 from execution.models import Execution
@@ -13,6 +11,7 @@ from fleetcore.interpretation import Interpretation
 from interpreter.service import interpret
 from places.worlds import load_world_into_db
 from robots.models import Binding, Robot
+from robots.poses import forget_poses, store_poses
 
 SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
 
@@ -34,10 +33,10 @@ def fleet(seeded_ontology, exec_settings, monkeypatch):
         )  # fmt: skip
         for role in ("move", "odometry"):
             Binding.objects.create(robot=robot, action=role, target=f"/{name}/{role}")
-        cache.set(live.POSE_CACHE_KEY.format(id=robot.pk), {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}, 60)
+        store_poses([{"id": robot.pk, "x": x, "y": y, "yaw": 0.0}])
         made[name] = robot
     yield made
-    cache.delete_many([live.POSE_CACHE_KEY.format(id=robot.pk) for robot in made.values()])
+    forget_poses([robot.pk for robot in made.values()])
 
 
 def planned(text, user) -> set[str]:

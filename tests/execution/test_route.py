@@ -8,6 +8,7 @@ from execution.instructions import submit
 from execution.route import footprint_radius, route
 from places.worlds import load_world_into_db
 from robots.models import Robot
+from robots.poses import forget_poses, store_poses
 from tests.execution.helpers import parse, step, wait_final
 
 CRATE = ((1.4, 2.6), (0.1, 0.5))  # the paper world's crate (fleetcore/worlds/make_paper_map.py)
@@ -72,21 +73,16 @@ BIG_SQUARE = [[-0.3, -0.3], [-0.3, 0.3], [0.3, 0.3], [0.3, -0.3]]
 
 @pytest.mark.django_db
 def test_route_goes_around_a_robot_parked_on_the_way():
-    from django.core.cache import cache
-
-    import live
 
     load_world_into_db("paper")
     robot = Robot.objects.create(name="tb", endpoint="ws://x/1", footprint=SQUARE)
     parked = Robot.objects.create(name="parked", endpoint="ws://x/2", footprint=BIG_SQUARE)
     assert route(robot, B, C) == [C]
-    cache.set(
-        live.POSE_CACHE_KEY.format(id=parked.pk), {"id": parked.pk, "x": I_[0], "y": I_[1], "yaw": 0.0}, 30
-    )
+    store_poses([{"id": parked.pk, "x": I_[0], "y": I_[1], "yaw": 0.0}])
     try:
         around = route(robot, B, C)
     finally:
-        cache.delete(live.POSE_CACHE_KEY.format(id=parked.pk))
+        forget_poses([parked.pk])
     assert around[-1] == C and len(around) >= 2
     assert _min_clearance(B, around, I_) > 0.3 + 0.1  # clear of the parked robot's body
 

@@ -7,7 +7,6 @@ import time
 import types
 
 import pytest
-from django.core.cache import cache
 
 import live
 from execution import coordination, driving, make_way, route, traffic, traffic_fleet, traffic_state
@@ -17,6 +16,7 @@ from fleetcore import traffic as plain
 from fleetcore import traffic_tuning as tune
 from places.worlds import load_world_into_db
 from robots.models import Robot
+from robots.poses import forget_poses, store_poses
 from tests.fleetcore.test_traffic import position
 
 SQUARE = [[-0.1, -0.1], [-0.1, 0.1], [0.1, 0.1], [0.1, -0.1]]
@@ -30,10 +30,10 @@ def robots(transactional_db, exec_settings):
     made = {}
     for name, (x, y) in {"a": (-2.0, 0.0), "b": (0.0, -2.0), "c": (4.0, 4.0)}.items():
         robot = Robot.objects.create(name=name, endpoint=f"ws://sim/{name}", footprint=SQUARE)
-        cache.set(live.POSE_CACHE_KEY.format(id=robot.pk), {"id": robot.pk, "x": x, "y": y, "yaw": 0.0}, 60)
+        store_poses([{"id": robot.pk, "x": x, "y": y, "yaw": 0.0}])
         made[name] = robot
     yield made
-    cache.delete_many([live.POSE_CACHE_KEY.format(id=r.pk) for r in made.values()])
+    forget_poses([r.pk for r in made.values()])
 
 
 def plan(robot, start, goal, speed, **options):
@@ -404,7 +404,7 @@ def test_a_robot_that_made_way_waits_while_the_other_has_no_plan_and_not_once_it
     # a waits for b where b stands aside: b goes back
     assert asyncio.run(make_way.until_passed(aside, request, home)) < 0.5
     redis.hdel(traffic_state.key("waits"), str(a.pk))
-    cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": 0.0, "y": -1.0, "yaw": 0.0}, 60)
+    store_poses([{"id": b.pk, "x": 0.0, "y": -1.0, "yaw": 0.0}])
     plan(a, (-2.0, -2.0), (2.0, -2.0), 0.3)  # a's plan passes b's home, where b stood
     entry = traffic_state.read(redis, "plans")[a.pk]
     late = [[c, r, t0 - 1000.0, t1 - 1000.0] for c, r, t0, t1 in entry["cells"]]
@@ -423,7 +423,7 @@ def test_a_stalled_robot_backs_off_only_into_room_it_has_claimed(robots):
 
     a, b = robots["a"], robots["b"]
     limits = motion.Limits(linear=0.5, angular=1.0)
-    cache.set(live.POSE_CACHE_KEY.format(id=b.pk), {"id": b.pk, "x": -2.45, "y": 0.0, "yaw": 0.0}, 60)
+    store_poses([{"id": b.pk, "x": -2.45, "y": 0.0, "yaw": 0.0}])
     blocked = StandingSession(a, (-2.0, 0.0, 0.0))  # heading east, b right behind it
     asyncio.run(back_off(blocked, limits))
     assert blocked.sent == []

@@ -279,3 +279,31 @@ async def test_a_socket_gone_under_its_pushes_is_dropped_quietly_and_the_others_
     await asyncio.sleep(0.01)
     assert [m["id"] for m in fine.got] == [1, 2, 3]
     assert not hub.sockets[gone].pending and "Traceback" not in caplog.text
+
+
+async def test_pushes_sent_together_reach_a_dashboard_each_in_their_order(viewer, fleet):
+    """A block's pushes to a group go as one channel-layer message (live.together); the process's reader
+    unpacks it, and the page gets every push, in order, as if each had come on its own."""
+    from asgiref.sync import sync_to_async
+
+    dashboard = await _connect("/ws/fleet/", viewer)
+    assert (await dashboard.receive_json_from(timeout=5))["type"] == "snapshot"
+    assert await one_member_of(live.FLEET_GROUP)
+    robots = [fleet[name] for name in ("turtlebot", "husky", "turtlebot", "husky")]
+    states = ["idle", "stopped", "stopped", "idle"]
+
+    def stop_like() -> None:
+        with live.together():
+            for robot, state in zip(robots, states, strict=True):
+                robot.state = state
+                live.robot_status(robot)
+
+    await sync_to_async(stop_like, thread_sensitive=False)()
+    got = []
+    while len(got) < len(robots):
+        frame = await dashboard.receive_json_from(timeout=5)
+        for message in live.page_messages(frame):
+            if message.get("type") == "robot.status":
+                got.append((message["robot"], message["state"]))
+    assert got == [(robot.name, state) for robot, state in zip(robots, states, strict=True)]
+    await dashboard.disconnect()

@@ -10,7 +10,7 @@ from django.utils import timezone
 from execution import queries
 from fleetcore.interpretation import Interpretation
 from robots.models import Robot
-from robots.poses import store_poses
+from robots.poses import forget_poses, store_poses
 
 
 def pose(robot, age: float, **extra) -> dict:
@@ -84,9 +84,19 @@ def test_a_stale_pose_is_said_stale_in_the_answers(fleet):
 @pytest.fixture(autouse=True)
 def _no_poses_left(fleet):
     """Poses live in the cache (Redis), not the test's database: none from one test may reach the next."""
-    from django.core.cache import cache
-
-    import live
 
     yield
-    cache.delete_many([live.POSE_CACHE_KEY.format(id=robot.pk) for robot in fleet.values()])
+    forget_poses([robot.pk for robot in fleet.values()])
+
+
+def test_a_robot_not_heard_of_for_a_minute_has_no_pose_though_others_keep_theirs(fleet, client_for, viewer):
+    """Every pose is a field of one hash, which expires as a whole: a robot whose odometry stopped a minute ago
+    (its link gone) while others' still come is not heard of, as when each pose expired on its own."""
+    from robots.poses import POSE_TTL_S, last_poses
+
+    turtlebot, husky = fleet["turtlebot"], fleet["husky"]
+    store_poses([pose(turtlebot, 0.1), pose(husky, POSE_TTL_S + 1)])
+    assert set(last_poses([turtlebot.pk, husky.pk])) == {turtlebot.pk}
+    client = client_for(viewer)
+    assert api_robot(client, "husky")["pose_status"] == "no pose"
+    assert api_robot(client, "turtlebot")["pose_status"] == "live"

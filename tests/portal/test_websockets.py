@@ -1,6 +1,9 @@
 """The pages' WebSockets: session auth, snapshot first, then deltas; commands refused for viewers and non-holders."""
 
 import asyncio
+import sys
+import threading
+import time
 
 import pytest
 from asgiref.sync import sync_to_async
@@ -11,6 +14,7 @@ from access import leases
 from access.models import ControlLease
 from fleet.asgi import application
 from robots.models import StateTransition
+from robots.poses import store_poses
 
 pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.asyncio, pytest.mark.timeout(30)]
 
@@ -94,12 +98,11 @@ async def test_snapshot_first_then_deltas(viewer, operator, fleet):
 
 
 async def test_snapshot_carries_the_holder_and_the_last_pose(viewer, operator, fleet):
-    from django.core.cache import cache
 
     turtlebot = fleet["turtlebot"]
     await sync_to_async(leases.take)(operator, turtlebot)
-    pose = {"id": turtlebot.pk, "x": 1.0, "y": 2.0, "yaw": 0.5, "v": 0.1, "w": 0.0, "t": 0.0}
-    await sync_to_async(cache.set)(live.POSE_CACHE_KEY.format(id=turtlebot.pk), pose)
+    pose = {"id": turtlebot.pk, "x": 1.0, "y": 2.0, "yaw": 0.5, "v": 0.1, "w": 0.0, "t": time.time()}
+    await sync_to_async(store_poses)([pose])
     communicator = await _connect(f"/ws/robots/{turtlebot.pk}/", viewer)
     snapshot = await communicator.receive_json_from(timeout=5)
     assert snapshot["robots"][0]["holder"] == "otto"
@@ -327,6 +330,92 @@ async def test_a_stop_publishes_zero_before_any_database_work(operator, fleet, r
     await communicator.disconnect()
 
 
+def _slow_bookkeeping(monkeypatch) -> tuple[list, threading.Event]:
+    """Zeros published and control.stop recorded in order ("zero", "bookkeeping"); control.stop waits for the
+    event (a large fleet's flags, second zeros, queues, leases and audit take seconds)."""
+    import execution
+
+    events, release = [], threading.Event()
+    _record_publishes(monkeypatch, lambda topic, message: events.append("zero"))
+
+    class Control:
+        @staticmethod
+        def stop(robots, user, source="console"):
+            events.append("bookkeeping")
+            release.wait(10)
+            return {getattr(robot, "name", robot): "stopped" for robot in robots}  # robots, or submit's names
+
+    monkeypatch.setitem(sys.modules, "execution.control", Control)
+    monkeypatch.setattr(execution, "control", Control, raising=False)
+    return events, release
+
+
+async def test_a_second_stop_is_not_held_behind_the_first_ones_bookkeeping(operator, fleet, monkeypatch):
+    """A stop's bookkeeping (control.stop, in a thread) takes seconds for a large fleet; the page's next frame, a
+    second STOP, gets its zeros out meanwhile. (It waited: whole stop trials of bench.cluster reached their first
+    robot seconds late.) Any other command waits for the stops before it: a stop never cancels what came after."""
+    from execution import fast_stop
+
+    events, release = _slow_bookkeeping(monkeypatch)
+    turtlebot = fleet["turtlebot"]
+    communicator = await _connect("/ws/fleet/", operator)
+    await communicator.receive_json_from(timeout=5)
+    await fast_stop.TARGETS._load()
+    await communicator.send_json_to({"command": "stop", "robots": [turtlebot.pk], "ref": 1})
+    await communicator.send_json_to({"command": "stop", "robots": [turtlebot.pk], "ref": 2})
+    for _ in range(100):  # bounded: the second zero leaves from the loop at once
+        if events.count("zero") == 2:
+            break
+        await asyncio.sleep(0.02)
+    assert events.count("zero") == 2 and not release.is_set()  # both out, the first bookkeeping still running
+    await communicator.send_json_to({"command": "dance", "ref": 3})  # anything else comes after the stops
+    assert await communicator.receive_nothing(timeout=0.3)
+    release.set()
+    replies = [await communicator.receive_json_from(timeout=5) for _ in range(3)]
+    assert sorted(r["ref"] for r in replies[:2]) == [1, 2] and all(r["ok"] for r in replies[:2])
+    assert replies[2]["ref"] == 3 and "unknown" in replies[2]["detail"]
+    await communicator.disconnect()
+
+
+async def test_a_stop_button_is_not_held_behind_a_typed_stop_being_stored(
+    operator, fleet, monkeypatch, seeded_ontology
+):
+    """A typed "stop turtlebot" gets its zeros out from the loop, then submit stores it (the instruction,
+    control.stop: seconds for a large fleet). A STOP pressed meanwhile gets its zero out at once (it waited for
+    the typed stop's submit); the typed stop and the STOP are both answered once stored."""
+    from execution import fast_stop
+
+    events, release = _slow_bookkeeping(monkeypatch)
+    turtlebot = fleet["turtlebot"]
+    communicator = await _connect("/ws/fleet/", operator)
+    await communicator.receive_json_from(timeout=5)
+    await fast_stop.TARGETS._load()
+    await communicator.send_json_to({"command": "instruct", "text": "stop turtlebot", "ref": "typed"})
+    for _ in range(250):  # bounded: the typed stop's zero, then its submit reaches control.stop
+        if "bookkeeping" in events:
+            break
+        await asyncio.sleep(0.02)
+    assert events[0] == "zero" and "bookkeeping" in events, events  # its head start, then submit's own zero
+    typed = events.count("zero")
+    await communicator.send_json_to({"command": "stop", "robots": [turtlebot.pk], "ref": "button"})
+    for _ in range(100):  # bounded: the STOP's zero leaves from the loop at once
+        if events.count("zero") > typed:
+            break
+        await asyncio.sleep(0.02)
+    assert events.count("zero") > typed and not release.is_set(), events  # out while the typed stop is stored
+    release.set()
+    refs = set()
+    for _ in range(20):  # bounded: both answers (pushes of the instruction may come between)
+        reply = await communicator.receive_json_from(timeout=10)
+        if reply.get("type") == "command.result":
+            assert reply["ok"] is True, reply
+            refs.add(reply["ref"])
+        if refs == {"typed", "button"}:
+            break
+    assert refs == {"typed", "button"}
+    await communicator.disconnect()
+
+
 async def test_a_typed_stop_over_the_socket_publishes_zero_before_the_instruction_is_stored(
     operator, fleet, recorded, seeded_ontology
 ):
@@ -414,9 +503,10 @@ async def test_presses_that_come_together_are_checked_in_one_call(operator, flee
         )
     replies = {}
     while len(replies) < 2:
-        reply = await communicator.receive_json_from(timeout=5)
-        if reply.get("type") == "command.result":
-            replies[reply["ref"]] = reply
+        frame = await communicator.receive_json_from(timeout=5)
+        for reply in live.page_messages(frame):  # answered together
+            if reply.get("type") == "command.result":
+                replies[reply["ref"]] = reply
     assert replies["turtlebot"]["ok"] is True
     assert replies["husky"]["ok"] is False and "no move topic" in replies["husky"]["detail"]
     assert calls == [sorted([turtlebot.pk, husky.pk])]

@@ -161,9 +161,8 @@ def test_the_page_starts_a_recording_and_serves_it(
 def test_a_replay_at_its_start_shows_every_robots_pose(fleet, tmp_path):
     """The husky stands still (its pose comes later, or not at all in the recording's seconds): the recording
     starts with every robot's last pose, so at t = 0 the replay shows both robots, not only the first to move."""
-    from django.core.cache import cache
 
-    from robots.poses import store_poses
+    from robots.poses import forget_poses, store_poses
 
     turtlebot, husky = fleet["turtlebot"], fleet["husky"]
     store_poses([{"id": husky.pk, "x": 2.0, "y": 1.0, "yaw": 1.57, "t": time.time()}])
@@ -175,7 +174,7 @@ def test_a_replay_at_its_start_shows_every_robots_pose(fleet, tmp_path):
         path = tmp_path / "start.mcap"
         _record_while_pushing(path, pushes)
     finally:
-        cache.delete_many([live.POSE_CACHE_KEY.format(id=robot.pk) for robot in fleet.values()])
+        forget_poses([robot.pk for robot in fleet.values()])
     frames = replay_frames(path)
     assert frames["robots"]["husky"][0][1:3] == pytest.approx([2.0, 1.0])
     first = {name: poses[0][0] for name, poses in frames["robots"].items()}

@@ -1,6 +1,7 @@
 """The asyncio rosbridge client against a rosbridge server (the simulator's), and against things that are not."""
 
 import asyncio
+import socket
 
 import pytest
 
@@ -69,6 +70,35 @@ async def test_publish_advertises_once_and_reaches_subscribers(endpoint):
             await talker.publish("/cmd_vel", {"linear": {"x": x}}, "geometry_msgs/Twist")
         first, second = await asyncio.wait_for(got.get(), 2), await asyncio.wait_for(got.get(), 2)
     assert (first["linear"]["x"], second["linear"]["x"]) == (0.1, 0.2)
+
+
+async def test_frames_keep_their_order_when_the_link_backs_up_and_drains(endpoint):
+    """An idle link's frame is written at once; one that finds the link backed up waits in websockets' send:
+    the listener gets them all, in the order they were published."""
+    ep = endpoint()
+    got, idle_before = [], []
+    padding = "x" * 100_000
+    async with RosbridgeClient(ep.url) as listener, RosbridgeClient(ep.url) as talker:
+        await listener.subscribe("/chatter", "std_msgs/String", got.append)
+        sock = talker._ws.transport.get_extra_info("socket")
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 4096)  # a small buffer: big frames back it up
+        await asyncio.sleep(0.05)
+        for i in range(100):  # 100 KB each, back to back: the link backs up
+            idle_before.append(talker.idle)
+            await talker.publish("/chatter", {"data": f"{i} {padding}"}, "std_msgs/String")
+        for i in range(100, 200):  # small ones, each once the link has drained
+            for _ in range(200):  # bounded: 10 MB leave loopback well within 10 s
+                if talker.idle:
+                    break
+                await asyncio.sleep(0.05)
+            idle_before.append(talker.idle)
+            await talker.publish("/chatter", {"data": f"{i}"}, "std_msgs/String")
+        for _ in range(200):
+            if len(got) == 200:
+                break
+            await asyncio.sleep(0.05)
+    assert [int(m["data"].split()[0]) for m in got] == list(range(200))
+    assert idle_before.count(False) > 50 and idle_before[100:] == [True] * 100  # both ways of writing taken
 
 
 async def test_unsubscribe_stops_messages(endpoint):

@@ -6,6 +6,7 @@ import pytest
 from asgiref.sync import sync_to_async
 from channels.layers import get_channel_layer
 
+import live
 from live import FLEET_GROUP
 from robots.links import LinkManager
 from robots.models import Robot
@@ -29,9 +30,9 @@ async def wait_status(name: str, status: str, timeout: float = 5.0) -> None:
 async def next_status(layer, channel: str, link_status: str) -> dict:
     """The next pushed robot.status with this link status (state changes push robot.status too)."""
     while True:
-        msg = await asyncio.wait_for(layer.receive(channel), 5)
-        if msg.get("type") == "robot.status" and msg["link_status"] == link_status:
-            return msg
+        for msg in live.unbatched(await asyncio.wait_for(layer.receive(channel), 5)):  # as every group reader
+            if msg.get("type") == "robot.status" and msg["link_status"] == link_status:
+                return msg
 
 
 async def test_offline_then_online_after_the_endpoint_restarts_and_hooks_resubscribe(endpoint):
@@ -127,6 +128,60 @@ async def test_links_stream_map_poses_to_the_portal(endpoint):
     finally:
         manager.stop()
         await asyncio.wait_for(asyncio.gather(*tasks), 10)
+
+
+async def test_the_pose_hook_subscribes_every_robot_while_djangos_shared_sync_thread_is_busy(endpoint):
+    """The links process writes each endpoint's link status through Django's one shared sync thread, a push per
+    robot; at 1,000 robots the pose hook, which made each robot's subscriptions on that thread behind those
+    writes, had subscribed 2 robots when the bench's dashboards looked (bench.cluster). It no longer waits."""
+    import threading
+
+    from robots.poses import PoseHub, link_hook
+
+    ep = endpoint()
+    await sync_to_async(register_endpoints)([ep.url])
+    robot = await Robot.objects.aget(name="fakebot")
+    odometry = (await robot.bindings.aget(action="odometry")).target
+
+    class Link:  # what the hook uses of a RosbridgeClient
+        url, closed, subscribed = ep.url, True, []
+
+        async def subscribe(self, topic, type_, callback, throttle_rate=0, queue_length=0):
+            self.subscribed.append(topic)
+
+    release = threading.Event()
+    shared = asyncio.ensure_future(sync_to_async(release.wait)(10))  # the shared thread, held by a long write
+    try:
+        await asyncio.wait_for(link_hook(PoseHub(publish=None))(Link(), []), 5)
+        assert odometry in Link.subscribed and not shared.done()
+    finally:
+        release.set()
+        await shared
+
+
+async def test_a_newly_registered_endpoint_is_linked_while_djangos_shared_sync_thread_is_busy(endpoint):
+    """The link status writes (a save, an alert and a push per robot) queue on Django's shared sync thread; the
+    links process's look for new endpoints waited behind them, and in one 1,000-robot run the second shard was
+    never linked while they ran (bench.cluster). It no longer waits."""
+    import threading
+
+    ep = endpoint()
+    await sync_to_async(register_endpoints)([ep.url])
+    release = threading.Event()
+    shared = asyncio.ensure_future(sync_to_async(release.wait)(10))  # the shared thread, held by a long write
+    manager = LinkManager()  # the endpoints as registered
+    task = asyncio.create_task(manager.run())
+    try:
+        for _ in range(100):
+            if ep.url in manager.links and manager.links[ep.url].is_connected:
+                break
+            await asyncio.sleep(0.05)
+        assert manager.links[ep.url].is_connected and not shared.done()
+    finally:
+        release.set()
+        await shared
+        manager.stop()
+        await asyncio.wait_for(task, 10)
 
 
 async def test_a_link_outlives_bad_frames_and_reconnects_after_garbage():

@@ -239,3 +239,26 @@ def test_nav_stacks_bind_their_speed_limits(paper_world):
     )  # no nav stack: the portal drives
     nav2 = Robot.objects.get(name="tb3_nav2")
     assert bound(nav2, "battery") == "/battery_state"
+
+
+def test_an_endpoint_of_many_robots_is_stored_in_a_few_queries_per_robot(django_assert_max_num_queries):
+    """Its robots' rows (topics, nodes, services, params, bindings) go in one insert per kind for the whole
+    endpoint: each robot costs its own save only, and every robot gets the rows it would get alone."""
+    from simworker.testing import running_world
+
+    with running_world("paper", extra=30, endpoints=["extra"]) as sim:
+        with django_assert_max_num_queries(2 * 30 + 40):  # was about 8 a robot: a round trip per kind
+            (result,) = register_endpoints([sim.urls["extra"]])
+        assert result.ok, result.error
+        (again,) = register_endpoints([sim.urls["extra"]])  # re-registration: rows compared, nothing changes
+    robots = Robot.objects.filter(name__startswith="robot").order_by("pk")
+    assert robots.count() == 30 and sorted(result.robots) == sorted(r.name for r in robots)
+    for robot in robots:
+        assert (
+            bound(robot, "move") == f"/{robot.name}/cmd_vel"
+            and bound(robot, "odometry") == f"/{robot.name}/odom"
+        )
+        assert robot.topics.filter(name=f"/{robot.name}/odom").exists()
+    per_robot = {robot.topics.count() for robot in robots}
+    assert len(per_robot) == 1 and per_robot.pop() > 3  # every robot got its whole graph
+    assert again.ok and not again.changes  # stored whole the first time: nothing to add

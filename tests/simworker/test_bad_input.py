@@ -1,6 +1,7 @@
 """Bad input never crashes the simulator nor slows other clients: it is dropped or the client is cut off."""
 
 import json
+import logging
 import socket
 import time
 
@@ -141,3 +142,15 @@ def test_a_client_that_never_reads_is_bounded_then_cut_off(world, bridge, monkey
     assert received >= 40  # the reader kept getting odometry all along
     assert world.call(lambda: len(server.clients)) == 1  # the silent client was disconnected
     silent.close()
+
+
+def test_a_full_send_queue_drops_the_oldest_and_says_so(caplog):
+    caplog.set_level(logging.WARNING, logger="simworker.server")
+    client = simworker.connection.Client(ws=None)
+    limit = simworker.connection.SEND_QUEUE
+    for i in range(limit + 5):
+        client.send(f"message {i}")
+    assert len(client.queue) == limit and client.queue[0][0] == "message 5"  # the oldest five went
+    assert client.overflowed == client.dropped == 5
+    said = [r.getMessage() for r in caplog.records if "send queue full" in r.getMessage()]
+    assert len(said) == 1 and said[0].endswith("the oldest dropped, 1 so far")  # one line, not one per drop

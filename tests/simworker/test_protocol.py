@@ -3,6 +3,7 @@
 import contextlib
 import itertools
 import json
+import socket
 import time
 
 import pytest
@@ -157,3 +158,45 @@ def test_fragments_are_reassembled(world, bridge):
     for num, data in reversed(list(enumerate(parts))):
         client.send("fragment", id="f1", data=data, num=num, total=len(parts))
     assert client.wait_for(lambda m: m.get("id") == "frag")["result"] is True
+
+
+def test_a_burst_of_messages_is_handled_without_a_turn_of_the_loop_each(world):
+    """Messages already read are handled one after another, as rosbridge does; a turn of the loop for each made a
+    stop's zeros wait behind a fleet's commands, a turn each, on a loaded endpoint (simworker.server.BURST_S)."""
+    zero = {"linear": {"x": 0.0, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
+    frames = b"".join(
+        _masked(json.dumps({"op": "publish", "topic": "/robot1/cmd_vel", "msg": zero})) for _ in range(300)
+    )
+    graph = world.fleet.servers["robots"].graph
+    turns, seen = [0], []
+
+    def spin():  # one call a turn of the loop, until the burst is handled
+        turns[0] += 1
+        if len(seen) < 300:
+            world.loop.call_soon(spin)
+
+    def record(_msg):
+        seen.append(turns[0])
+
+    world.call(graph.on_topic, "/robot1/cmd_vel", record)
+    host, port = world.urls["robots"].removeprefix("ws://").rsplit(":", 1)
+    with socket.create_connection((host, int(port))) as sock:
+        sock.sendall(
+            f"GET / HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+            "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n".encode()
+        )
+        sock.recv(4096)  # the handshake's answer: the connection is open
+        world.call(spin)
+        sock.sendall(frames)  # 300 publishes in one write
+        deadline = time.monotonic() + 10
+        while len(seen) < 300 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    world.call(graph.topic_handlers["/robot1/cmd_vel"].remove, record)
+    assert len(seen) == 300
+    assert seen[-1] - seen[0] < 100  # a turn per message would be 299 or more
+
+
+def _masked(text: str) -> bytes:
+    """One client text frame (masked, zero mask) of a payload under 64 KB."""
+    payload = text.encode()
+    return bytes([0x81, 0x80 | 126]) + len(payload).to_bytes(2, "big") + b"\0\0\0\0" + payload
