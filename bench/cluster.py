@@ -373,6 +373,12 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
         },
         "live": live,
         "cpu_cores": {**cpu, "total": round(sum(cpu.values()), 3)},
+        # what the CPU window held: per press and per robot stopped is the cost model's "doing" (docs/scale.md)
+        "cpu_window": {
+            "seconds": round(wall, 2),
+            "presses": len(names) * (rounds + 3),
+            "robots_stopped": 3 * len(names),
+        },
     }
 
 

@@ -20,11 +20,10 @@ import sys
 import time
 import urllib.request
 
-import ujson
-
 from experiments.drivers import PortalDriver
 from experiments.probe import TWIST_TYPE, twist
 from fleet import websocket
+from fleetcore import jsontext
 from robots.rosbridge import RosbridgeClient
 
 
@@ -46,7 +45,7 @@ async def app(scope, receive, send) -> None:
             message = await receive()
             if message["type"] != "websocket.receive":
                 return
-            frame = ujson.loads(message.get("text") or message.get("bytes"))
+            frame = jsontext.loads(message.get("text") or message.get("bytes"))
             client = clients.get(frame["url"])
             if client is None:
                 client = clients[frame["url"]] = RosbridgeClient(frame["url"], ping_interval=None)

@@ -23,6 +23,7 @@ from collections.abc import Callable
 from websockets.asyncio.server import ServerConnection, serve
 from websockets.exceptions import ConnectionClosed
 
+from fleetcore import jsontext
 from simworker import outgoing, rosapi
 from simworker.connection import Client, Subscription
 from simworker.graph import Graph, ServiceError
@@ -191,7 +192,7 @@ class RosbridgeServer:
     def dispatch(self, client: Client, raw: str | bytes) -> None:
         """Decode one frame and run its op; anything wrong is logged (as rosbridge's protocol logs it)."""
         try:
-            msg = json.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
+            msg = jsontext.loads(raw.decode("utf-8") if isinstance(raw, bytes) else raw)
         except (ValueError, UnicodeDecodeError) as exc:  # rosbridge drops undecodable input silently
             log.debug("%s: undecodable message dropped: %s", self.key, exc)
             return
