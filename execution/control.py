@@ -208,7 +208,7 @@ def teleop_grants(robot_ids, user) -> dict[int, TeleopGrant | Exception]:
     rows = marked_rows(Robot.objects.filter(pk__in=ids), "max_linear", "max_angular")
     robots = {robot.pk: robot for robot in rows}
     found = list(robots)
-    held = {lease.robot_id: lease.user for lease in leases.active(found)}
+    held = leases.holders(found, user)
     busy = dict(
         Execution.objects.filter(robot__in=found, status=Execution.Status.RUNNING).values_list(
             "robot_id", "instruction_id"

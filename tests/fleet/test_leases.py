@@ -53,3 +53,24 @@ def test_only_holder_or_admin_releases(husky, operator, second_operator, fleet_a
         leases.release(second_operator, husky)
     assert leases.release(fleet_admin, husky) is True
     assert leases.holder(husky) is None
+
+
+def test_holders_names_each_robots_holder_and_reads_no_user_for_the_callers_own_leases(
+    husky, operator, second_operator, django_assert_num_queries
+):
+    """A teleop re-check reads a fleet's holders every half second: the presser's own leases build no user row."""
+    tiago = Robot.objects.create(name="tiago", endpoint="ws://127.0.0.1:9093")
+    free = Robot.objects.create(name="free", endpoint="ws://127.0.0.1:9094")
+    gone = Robot.objects.create(name="gone", endpoint="ws://127.0.0.1:9095")
+    leases.take(operator, husky)
+    leases.take(second_operator, tiago)
+    leases.take(operator, gone)
+    ControlLease.objects.filter(robot=gone).update(expires_at=timezone.now() - timedelta(seconds=1))
+    ids = [husky.pk, tiago.pk, free.pk, gone.pk]
+    with django_assert_num_queries(2):  # the leases' ids, then the one other holder
+        held = leases.holders(ids, operator)
+    assert held == {husky.pk: operator, tiago.pk: second_operator}
+    assert held[husky.pk] is operator and held[tiago.pk].username == "olga"
+    with django_assert_num_queries(1):
+        assert leases.holders([husky.pk, free.pk], operator) == {husky.pk: operator}
+    assert leases.holders(ids) == {husky.pk: operator, tiago.pk: second_operator}
