@@ -17,7 +17,7 @@ from access import leases
 from access.leases import ControlRefused
 from access.roles import can_control
 from audit import records as audit
-from robots.models import Robot
+from robots.models import STATUS_FIELDS, Robot
 
 AUTOMATIC = frozenset({"schedule", "traffic"})  # instruction sources that are the system's, not a person's
 
@@ -35,7 +35,9 @@ def hold(robots, user, reason: str = "a stop") -> None:
     """A person stopped these robots: hold them (again, from now, by that person)."""
     ids = [robot.pk for robot in robots]
     Robot.objects.filter(pk__in=ids).update(held_at=timezone.now(), held_by=user, held_reason=reason)
-    for robot in Robot.objects.filter(pk__in=ids).select_related("held_by"):
+    for robot in (
+        Robot.objects.filter(pk__in=ids).select_related("held_by").only(*STATUS_FIELDS, "held_by__username")
+    ):
         live.robot_status(robot)
 
 

@@ -65,19 +65,23 @@ GOALS = {  # issue 19, for 1,000 robots
 }
 
 
+def host_cpu(host: str) -> float:
+    """CPU seconds used so far by every process of one host (the namespace's processes)."""
+    total = 0.0
+    for pid in host_pids(host):
+        try:
+            times = psutil.Process(pid).cpu_times()
+            total += times.user + times.system
+        except psutil.Error:
+            pass
+    return total
+
+
 def cpu_seconds() -> dict[str, float]:
-    """CPU seconds used so far by every process of each host (the namespace's processes)."""
-    used = {}
-    for host in ("db", "web1", "web2", "exec1", "exec2", "sim1", "sim2", "links"):
-        total = 0.0
-        for pid in host_pids(host):
-            try:
-                times = psutil.Process(pid).cpu_times()
-                total += times.user + times.system
-            except psutil.Error:
-                pass
-        used[host] = total
-    return used
+    """CPU seconds used so far by every process of each host."""
+    return {
+        host: host_cpu(host) for host in ("db", "web1", "web2", "exec1", "exec2", "sim1", "sim2", "links")
+    }
 
 
 class Reception:

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 from django.core.cache import cache
 from django.db import DatabaseError
-from django.db.models import prefetch_related_objects
 from django.utils import timezone
 
 import alerts
@@ -30,7 +29,7 @@ from execution.link import LinkError, publish_zero
 from execution.models import Execution
 from execution.runner import settle
 from fleetcore import faults, motion
-from robots.commands import CommandSurface, kept_surfaces, marked_rows
+from robots.commands import ROW_FIELDS, CommandSurface, kept_surfaces, marked_rows
 from robots.models import Robot
 from robots.rosbridge import pool as links
 from robots.rosbridge import sync
@@ -41,13 +40,16 @@ WAITING = (Execution.Status.QUEUED, Execution.Status.PREEMPTED)
 
 
 def _robots(robots) -> list[Robot]:
-    """Robots from robots, names or primary keys."""
+    """Robots from robots, names or primary keys (those read with the columns a stop or a press needs)."""
     robots = list(robots)
     if robots and all(isinstance(r, Robot) for r in robots):
         return robots
     names = [r for r in robots if isinstance(r, str)]
     pks = [r for r in robots if isinstance(r, int)]
-    found = list(Robot.objects.filter(name__in=names)) + list(Robot.objects.filter(pk__in=pks))
+    found = [
+        *Robot.objects.filter(name__in=names).only(*ROW_FIELDS),
+        *Robot.objects.filter(pk__in=pks).only(*ROW_FIELDS),
+    ]
     missing = set(names) - {r.name for r in found}
     if missing:
         raise ValueError(f"No robot named {', '.join(sorted(missing))} is registered.")
@@ -82,12 +84,15 @@ def stop(robots, user, source: str = "console", database_fault: str | None = Non
     robots = _robots(robots)
     if user is not None:
         check_stop(user)  # held robots too: a lease never blocks a stop
-    try:  # every robot's bindings in one query, not one per robot in the zeros' threads
-        prefetch_related_objects(robots, "bindings")
+    try:  # every robot's surface at once, its bindings read only if they changed since this process read them
+        kept = kept_surfaces(marked_rows(Robot.objects.filter(pk__in=[r.pk for r in robots])))
     except DatabaseError as exc:  # each robot's zero then reads its own, and says why it could not
-        log.warning("stop: bindings not read at once: %s", exc)
+        log.warning("stop: command surfaces not read at once: %s", exc)
+        kept = {}
+    surfaces = [kept.get(robot.pk) for robot in robots]
     with ThreadPoolExecutor(max_workers=min(8, max(1, len(robots)))) as pool:
-        results = StopResults(zip([r.name for r in robots], pool.map(_publish_zero, robots), strict=True))
+        zeros = pool.map(_publish_zero, robots, surfaces)
+        results = StopResults(zip([r.name for r in robots], zeros, strict=True))
     if database_fault:
         results.failed["the database"] = database_fault
     with brief_lock_wait(), live.together():  # its pushes (a status per robot) in one hand-over
@@ -130,9 +135,9 @@ def _record(stop_results: StopResults, store: str, action, *args, **kwargs):
         return None
 
 
-def _publish_zero(robot: Robot) -> str:
+def _publish_zero(robot: Robot, surface: CommandSurface | None = None) -> str:
     try:
-        publish_zero(robot)
+        publish_zero(robot, surface)
     except (LinkError, Exception) as exc:  # one unreachable robot must not keep the others moving
         log.warning("stop %s: %s", robot.name, exc)
         return f"not reached: {exc}"

@@ -46,10 +46,10 @@ def publish_all(client, items, wait: bool = False) -> list:
     return client.runner.run(commands.send(client.client, items, wait), commands.CALL_TIMEOUT + 1.0)
 
 
-def publish_zero(robot: Robot) -> None:
+def publish_zero(robot: Robot, surface: CommandSurface | None = None) -> None:
     """Publish a zero velocity on the robot's move topic and cancel its navigation goal, now (a goal topic's
-    robot: a goal where its last pose says it is)."""
-    surface = CommandSurface.of(robot)
+    robot: a goal where its last pose says it is); surface: the robot's, if the caller has it (else read)."""
+    surface = surface or CommandSurface.of(robot)
     if not surface.can_move:
         raise LinkError(f"{robot.name}: no move topic is bound")
     here = None

@@ -66,6 +66,11 @@ def robot_name_from(text: str) -> str:
     return f"robot-{name}" if name.isdigit() or grammar.reserved(name) else name
 
 
+# What live.robot_status pushes of a robot (its hold_words too, with the holder's username): the columns to read
+# when a robot is loaded only to say its status (a stop's holds: no footprint or URDF facts for each robot stopped).
+STATUS_FIELDS = ("id", "name", "link_status", "state", "last_seen", "held_at", "held_by", "held_reason")
+
+
 class Robot(models.Model):
     """One robot reachable through a rosbridge endpoint, possibly under a namespace."""
 

@@ -61,7 +61,7 @@ def held_words(robot) -> str:
 
 def test_a_persons_stop_holds_the_robot_and_the_systems_stop_does_not(fleet, fleet_admin, monkeypatch):
     monkeypatch.setattr(
-        control, "_publish_zero", lambda robot: "stopped"
+        control, "_publish_zero", lambda robot, surface: "stopped"
     )  # no simulator: the zero is elsewhere
     tiago, husky = fleet("tiago", 0.0, -3.0), fleet("husky", 1.5, -1.3)
     control.stop([tiago], fleet_admin)
@@ -190,7 +190,7 @@ def test_a_stops_status_pushes_go_in_one_hand_over_in_order(
     the stop's pushes (live.together), each robot's status in it, in the robots' order."""
     import live
 
-    monkeypatch.setattr(control, "_publish_zero", lambda robot: "stopped")  # no simulator here
+    monkeypatch.setattr(control, "_publish_zero", lambda robot, surface: "stopped")  # no simulator here
     robots = [
         Robot.objects.create(name=f"r{n}", endpoint=f"ws://sim/r{n}", footprint=SQUARE) for n in range(4)
     ]
