@@ -89,7 +89,7 @@ def claim(execution: Execution, token: str) -> bool:
         Instruction.objects.filter(
             pk=execution.instruction_id, status__in=(Instruction.Status.QUEUED, Instruction.Status.RECEIVED)
         ).update(status=Instruction.Status.RUNNING)
-        _push_instruction(execution.instruction_id)
+        _push_instruction(execution.instruction_id, [execution.robot_id])
     return bool(won)
 
 
@@ -190,7 +190,8 @@ def _held_back(execution: Execution) -> bool:
     Execution.objects.filter(pk=execution.pk, status__in=WAITING).update(
         status=Execution.Status.CANCELLED, finished_at=timezone.now(), error=holds.refusal(robot)[:2000]
     )
-    settle(execution.instruction_id)
+    if not settle(execution.instruction_id):
+        _push_instruction(execution.instruction_id, [execution.robot_id])
     return True
 
 
@@ -227,15 +228,17 @@ def finish(execution: Execution, token: str, outcome: str, words: str) -> bool:
         Robot.objects.transition(
             execution.robot_id, OUTCOME_EVENT[outcome], words[:255], execution.instruction_id
         )
-        settle(execution.instruction_id, words if outcome == "succeeded" else "")
+        if not settle(execution.instruction_id, words if outcome == "succeeded" else ""):
+            _push_instruction(execution.instruction_id, [execution.robot_id])  # its share ended; others run
     return bool(won)
 
 
-def settle(instruction_id: int, note: str = "") -> None:
-    """Give the instruction its final status once every robot's share has one."""
+def settle(instruction_id: int, note: str = "") -> bool:
+    """Give the instruction its final status once every robot's share has one (and push it with every robot's
+    task list): whether it did."""
     rows = list(Execution.objects.filter(instruction_id=instruction_id).select_related("robot"))
     if not rows or any(row.status not in FINAL for row in rows):
-        return
+        return False
     found = {row.status for row in rows}
     if Execution.Status.FAILED in found:
         status = Instruction.Status.FAILED
@@ -252,12 +255,18 @@ def settle(instruction_id: int, note: str = "") -> None:
         status=status, finished_at=timezone.now(), outcome=outcome[:4000]
     )
     _push_instruction(instruction_id)
+    return True
 
 
-def _push_instruction(instruction_id: int) -> None:
+def _push_instruction(instruction_id: int, robot_ids: list[int] | None = None) -> None:
+    """The instruction to the pages, with the task lists of these robots (None: all of its robots). A robot's
+    claim or end changes its own list only: pushing every robot's on each of them made an instruction to N
+    robots cost N x N task lists, which starved an executor starting 50 robots until their locks lapsed."""
     instruction = Instruction.objects.filter(pk=instruction_id).first()
     if instruction is not None:
         live.instruction(instruction)
-        queues.push_queues(
-            Execution.objects.filter(instruction_id=instruction_id).values_list("robot_id", flat=True)
-        )
+        if robot_ids is None:
+            robot_ids = Execution.objects.filter(instruction_id=instruction_id).values_list(
+                "robot_id", flat=True
+            )
+        queues.push_queues(robot_ids)

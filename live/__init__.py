@@ -4,11 +4,14 @@ Groups: "fleet" (every dashboard), "robot.<pk>" (a robot's page) and "alerts" (e
 and forward; the handler name in the consumer matches the payload's "type".
 """
 
+from __future__ import annotations
+
 import asyncio
 import contextlib
 import logging
 import threading
 import time
+import weakref
 from collections.abc import Iterator
 from typing import NotRequired, TypedDict
 
@@ -89,7 +92,8 @@ SEND_TIMEOUT_S = 0.5  # a push waits this long at most for Redis (the channel la
 QUIET_S = 2.0  # after a push failed, the next ones are skipped this long: a frozen Redis costs one wait
 _quiet_until = 0.0
 _home = threading.local()  # .loop: the event loop this thread's pushes are handed to (deliver_on)
-_delivering: set[asyncio.Future] = set()  # handed-over pushes under way (a task needs a strong reference)
+# the outbox of each loop pushes are handed to (deliver_on)
+_outboxes: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, Outbox] = weakref.WeakKeyDictionary()
 
 
 def deliver_on(loop: asyncio.AbstractEventLoop) -> None:
@@ -99,6 +103,39 @@ def deliver_on(loop: asyncio.AbstractEventLoop) -> None:
     thread each time, and the channel layer opens a new Redis connection for that loop: a few milliseconds of
     CPU per push, where the loop's own connection costs a send. Handed over, a push does not wait for Redis."""
     _home.loop = loop
+
+
+class Outbox:
+    """The pushes handed to one event loop (deliver_on), sent in their order by one task at a time: what comes
+    while it sends goes in its next round, each group's pushes in one message (_batched). A task per push let an
+    executor starting 50 robots have hundreds of channel-layer sends in flight at once: the layer's pool of 100
+    connections ran out (MaxConnectionsError) and the loop's time went to them rather than to its robots."""
+
+    def __init__(self) -> None:
+        self.pending: list[tuple[str, dict]] = []
+        self.sending: asyncio.Task | None = None
+
+    def put(self, group: str, payload: dict) -> None:
+        self.pending.append((group, payload))
+        if self.sending is None:
+            self.sending = asyncio.ensure_future(self._send())
+
+    async def _send(self) -> None:
+        try:
+            while self.pending:
+                pushes, self.pending = self.pending, []
+                await _send_each(get_channel_layer(), _batched(pushes))
+        finally:
+            self.sending = None
+
+
+def _outbox(group: str, payload: dict) -> None:
+    """On the loop's thread: the push into the loop's outbox."""
+    loop = asyncio.get_running_loop()
+    box = _outboxes.get(loop)
+    if box is None:
+        box = _outboxes[loop] = Outbox()
+    box.put(group, payload)
 
 
 def send(group: str, payload: dict) -> None:
@@ -118,9 +155,7 @@ def send(group: str, payload: dict) -> None:
     if loop is not None and not loop.is_closed():
         # (RuntimeError: the loop closed meanwhile, and the push is lost, as on a failure)
         with contextlib.suppress(RuntimeError):
-            future = asyncio.run_coroutine_threadsafe(_send_logged(layer, group, payload), loop)
-            _delivering.add(future)
-            future.add_done_callback(_delivering.discard)
+            loop.call_soon_threadsafe(_outbox, group, payload)
         return
     try:
         async_to_sync(_send_bounded)(layer, group, payload)

@@ -34,12 +34,53 @@ async def test_a_push_from_the_pool_goes_out_on_the_loop_not_through_a_new_event
     try:
         for n in range(3):
             await blocking.call(push, n)
-        got = [(await asyncio.wait_for(layer.receive(channel), 5))["n"] for _ in range(3)]
+        got = await _received(layer, channel, 3)
     finally:
         await blocking.close()
-    assert sorted(got) == [0, 1, 2]
+    assert got == [0, 1, 2]
     assert all(name.startswith("executor-blocking") for name in sent_from)  # pushed from the pool's threads
     assert fresh_loops == []  # none of them went through async_to_sync
+
+
+async def _received(layer, channel, count: int) -> list[int]:
+    """The n of the first `count` pushes read from the channel (a handed-over burst comes batched)."""
+    got = []
+    while len(got) < count:
+        got += [push["n"] for push in live.unbatched(await asyncio.wait_for(layer.receive(channel), 5))]
+    return got
+
+
+async def test_a_burst_of_pushes_from_the_pool_goes_in_order_one_send_at_a_time(monkeypatch):
+    """An executor starting 50 robots pushes hundreds of task lists and statuses from its pool at once: they go
+    one channel-layer send at a time, in their order, each group's waiting ones in one message (a task per push
+    had hundreds of sends in flight: the layer's 100 connections ran out, bench.cluster)."""
+    layer, group, channel = await _listening()
+    real, in_flight, most = live._send_bounded, [0], [0]
+
+    async def counted(layer_, group_, payload):
+        in_flight[0] += 1
+        most[0] = max(most[0], in_flight[0])
+        try:
+            await real(layer_, group_, payload)
+        finally:
+            in_flight[0] -= 1
+
+    monkeypatch.setattr(live, "_send_bounded", counted)
+    pushes = 300
+
+    def burst(start: int) -> None:
+        for n in range(start, start + pushes // 3):
+            live.send(group, {"type": "test.push", "n": n})
+
+    try:
+        await asyncio.gather(*(blocking.call(burst, start) for start in (0, 100, 200)))
+        got = await _received(layer, channel, pushes)
+    finally:
+        await blocking.close()
+    assert sorted(got) == list(range(pushes))
+    for start in (0, 100, 200):  # each thread's pushes in the order it sent them
+        assert [n for n in got if start <= n < start + 100] == list(range(start, start + 100))
+    assert most[0] == 1
 
 
 async def test_a_push_from_any_other_thread_still_goes_out(monkeypatch):

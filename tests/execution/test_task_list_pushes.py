@@ -1,0 +1,61 @@
+"""The task lists an instruction to many robots pushes: a robot's claim and its end push that robot's list only;
+the instruction's last end pushes every robot's. (Every robot's list on each claim made an instruction to N robots
+cost N x N lists: an executor starting 50 robots at once starved until their locks lapsed, bench.cluster.)"""
+
+from __future__ import annotations
+
+import pytest
+
+import live
+from execution import runner
+from execution.models import Execution, Instruction
+from robots.models import Robot
+
+ROBOTS = 6
+
+
+@pytest.fixture
+def shares(db):
+    """One instruction to ROBOTS robots, each robot's share queued."""
+    robots = [
+        Robot.objects.create(name=f"r{i}", endpoint="ws://127.0.0.1:1", namespace=f"/r{i}", state="ready")
+        for i in range(ROBOTS)
+    ]
+    instruction = Instruction.objects.create(text="turn left", status=Instruction.Status.QUEUED)
+    instruction.robots.set(robots)
+    return [
+        Execution.objects.create(instruction=instruction, robot=robot, steps=[{"action": "turn_by"}])
+        for robot in robots
+    ]
+
+
+@pytest.fixture
+def pushed(monkeypatch):
+    """The robot ids whose task list was pushed, in order."""
+    ids: list[int] = []
+    monkeypatch.setattr(live, "queue", lambda payload: ids.append(payload["id"]))
+    return ids
+
+
+def test_each_claim_pushes_only_the_claiming_robots_task_list(shares, pushed):
+    for execution in shares:
+        assert runner.claim(execution, "token")
+    assert pushed == [execution.robot_id for execution in shares]  # ROBOTS lists, not ROBOTS x ROBOTS
+    assert Instruction.objects.get(pk=shares[0].instruction_id).status == "running"
+
+
+def test_a_share_that_ends_pushes_its_robots_list_and_the_last_pushes_every_robots(shares, pushed):
+    for execution in shares:
+        runner.claim(execution, "token")
+    pushed.clear()
+    first, *others = shares
+    assert runner.finish(first, "token", "succeeded", "turned")
+    assert pushed == [first.robot_id]  # its list shows nothing running, while the others still turn
+    assert Instruction.objects.get(pk=first.instruction_id).status == "running"
+    pushed.clear()
+    for execution in others:
+        runner.finish(execution, "token", "succeeded", "turned")
+    ended = [execution.robot_id for execution in others[:-1]]
+    assert pushed[: len(ended)] == ended
+    assert sorted(pushed[len(ended) :]) == sorted(e.robot_id for e in shares)  # settled: every robot's list
+    assert Instruction.objects.get(pk=first.instruction_id).status == "succeeded"
