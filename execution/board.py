@@ -2,10 +2,14 @@
 
 Each robot the process runs holds its lock through a Lease. Every TICK_S the board sends one pipeline: each
 lease's stop, preempt and cancel flags (a robot's session reads them from its lease, with no I/O, before every
-command) and, every HEARTBEAT_S, the renewal of each lease whose command loop beat within LIVELY_S. The robots'
-poses, kept now and then for the fleet (robots.poses), leave in one batch per tick too. So a driven robot
-costs its process no Redis call of its own per control tick, and no thread: the board is one task on the
-executor's loop.
+command). The robots' poses, kept now and then for the fleet (robots.poses), leave in one batch per tick too. So
+a driven robot costs its process no Redis call of its own per control tick, and no thread.
+
+The renewals go from one thread of the board's own, every HEARTBEAT_S in one pipeline: each lease whose command
+loop beat within LIVELY_S. On the loop they waited behind everything else the loop does: an executor starting 50
+robots at once (an instruction to all of them, bench.cluster) had its round trips take 100 to 470 ms, and with
+renewals due every HEARTBEAT_S the locks' one-second time to live ran out, so the watchdog called the executor
+lost and the instruction failed. The thread needs the interpreter's lock only for a moment, every HEARTBEAT_S.
 
 What a lease says, as the threaded heartbeat said before it (execution.coordination):
 - `held`: the lock was confirmed within its time to live and never refused. A killed or frozen process renews
@@ -26,8 +30,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 import time
 
+import redis
 import redis.asyncio
 from django.conf import settings
 from redis.exceptions import RedisError, ResponseError
@@ -50,8 +56,7 @@ class Lease:
     def __init__(self, lock: RobotLock, lively: float = LIVELY_S) -> None:
         self.lock, self.lively = lock, lively
         self.renewed = self.alive_until = time.monotonic()
-        self.next_renewal = 0.0
-        self.lost = self.quiet = False
+        self.lost = self.quiet = False  # written by the board's renewals thread, read on the loop
         self.fault: str | None = None  # why Redis refused a renewal's write (a full disk), in words
         self.error: RedisError | None = None  # the last read's failure, until a read succeeds
         self.watched: int | None = None  # the execution whose cancel flag is read
@@ -97,16 +102,20 @@ class Lease:
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self._read.wait(), timeout)
 
-    def _took(self, renewed, values, now: float) -> None:
-        """The answers of one round trip: the renewal's (None when not sent) and the flags."""
-        if renewed is not None:
-            if isinstance(renewed, ResponseError):
-                self.fault = faults.refusal(renewed) or str(renewed)
-                self.lost = True
-            elif renewed:
-                self.renewed = now
-            else:
-                self.lost = True
+    def _renewed(self, renewed, sent: float) -> None:
+        """The answer of a renewal sent at `sent` (the renewals thread)."""
+        if isinstance(renewed, ResponseError):
+            self.fault = faults.refusal(renewed) or str(renewed)
+            self.lost = True
+        elif isinstance(renewed, Exception):
+            return  # not renewed this time: the next may still come in time
+        elif renewed:
+            self.renewed = sent
+        else:
+            self.lost = True
+
+    def _took(self, values) -> None:
+        """The flags of one round trip."""
         stop, preempt, cancel = values
         self.flags = (float(stop) if stop else 0.0, int(preempt) if preempt else None,
                       cancel.decode() if cancel else None)  # fmt: skip
@@ -138,8 +147,10 @@ class Board:
         self.leases.discard(lease)
 
     async def run(self) -> None:
-        """Tick until cancelled, at once when a flag is raised."""
+        """Tick until cancelled, at once when a flag is raised; the renewals' thread meanwhile."""
         listening = asyncio.ensure_future(self._listen())
+        ended = threading.Event()
+        threading.Thread(target=self._renewals, args=(ended,), name="executor renewals", daemon=True).start()
         try:
             while True:
                 started = time.monotonic()
@@ -150,26 +161,19 @@ class Board:
                         self._nudged.wait(), max(0.0, self.tick - (time.monotonic() - started))
                     )
         finally:
+            ended.set()
             listening.cancel()
             if self._client is not None:
                 with contextlib.suppress(Exception):  # closing a link to a Redis that is away
                     await self._client.aclose()
 
     async def once(self) -> None:
-        """One round trip: renewals due, every lease's flags; then the poses kept since the last tick."""
+        """One round trip: every lease's flags; then the poses kept since the last tick."""
         leases = list(self.leases)
         if not leases:
             return
-        now = time.monotonic()
         pipe = self._redis().pipeline(transaction=False)
-        renewing = []
         for lease in leases:
-            lease.quiet = now > lease.alive_until
-            due = not lease.quiet and not lease.lost and now >= lease.next_renewal
-            if due:
-                lease.next_renewal = now + self.every
-                pipe.eval(RENEW, 1, lease.lock.key, lease.token, lease.lock.ttl_ms)
-            renewing.append(due)
             robot = lease.lock.robot_id
             cancel = key("cancel", lease.watched) if lease.watched is not None else key("cancel", "none")
             pipe.mget(key("stop", robot), key("preempt", robot), cancel)
@@ -180,15 +184,42 @@ class Board:
             for lease in leases:
                 lease._failed(error)
             return
-        answers = iter(answers)
-        for lease, due in zip(leases, renewing, strict=True):
-            renewed = next(answers) if due else None
-            values = next(answers)
+        for lease, values in zip(leases, answers, strict=True):
             if isinstance(values, Exception):
                 lease._failed(values if isinstance(values, RedisError) else RedisError(str(values)))
                 continue
-            lease._took(renewed, values, now)
+            lease._took(values)
         self._store_poses(leases)
+
+    def _renewals(self, ended: threading.Event) -> None:
+        """The renewals thread: every `every`, renew each lease whose command loop beat, in one pipeline, until
+        the board ends (a Redis that fails a round trip is tried again next time; the flags' reads say it)."""
+        client = redis.Redis.from_url(
+            settings.REDIS_URL, socket_timeout=REDIS_TIMEOUT_S, socket_connect_timeout=REDIS_TIMEOUT_S
+        )
+        try:
+            while not ended.wait(self.every):
+                with contextlib.suppress(RedisError, OSError):
+                    self.renew(client)
+        finally:
+            client.close()
+
+    def renew(self, client: redis.Redis) -> None:
+        """One pipeline renewing every lease that is neither quiet (its command loop has not beaten within its
+        lively time: hung) nor lost."""
+        now = time.monotonic()
+        due = []
+        for lease in list(self.leases):  # one C call: safe while the loop adds and drops leases
+            lease.quiet = now > lease.alive_until
+            if not lease.quiet and not lease.lost:
+                due.append(lease)
+        if not due:
+            return
+        pipe = client.pipeline(transaction=False)
+        for lease in due:
+            pipe.eval(RENEW, 1, lease.lock.key, lease.token, lease.lock.ttl_ms)
+        for lease, renewed in zip(due, pipe.execute(raise_on_error=False), strict=True):
+            lease._renewed(renewed, now)
 
     async def _listen(self) -> None:
         """Nudge the loop on every message of the flags channel; a lost subscription is made again (the ticks
