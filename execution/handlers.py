@@ -218,7 +218,7 @@ async def move_by(session: Session, step: Step) -> str:
     limits = step.pace(session.link.limits()).limits
     controller = motion.Straight(distance, limits)
     await _drive_by(session, f"moving {doing}", controller, travel_time(abs(distance), 0.0, limits))
-    return f"moved {doing}"
+    return outcomes.moved(distance, controller.done(await at_rest(session)))
 
 
 async def turn_by(session: Session, step: Step) -> str:
@@ -230,7 +230,7 @@ async def turn_by(session: Session, step: Step) -> str:
     await _drive_by(
         session, f"turning {doing}", controller, travel_time(0.0, abs(math.radians(degrees)), limits)
     )
-    return f"turned {doing}"
+    return outcomes.turned(degrees, math.degrees(controller.done(await at_rest(session))))
 
 
 async def _drive_by(session: Session, doing: str, controller, limit: float) -> None:

@@ -254,15 +254,18 @@ def _heading_error(pose, goal) -> float:
 
 
 async def at_rest(session: Session) -> tuple[float, float, float]:
-    """Stop the robot and read odometry until it has come to rest (two poses within REST_M, at most
-    REST_LIMIT_S): where it stands. Where a step ends is judged from it, not from the pose as the robot was told
+    """Stop the robot and read odometry until it has come to rest (two poses within REST_M and REST_RAD, at
+    most REST_LIMIT_S): where it stands. Where a step ends is judged from it, not from the pose as the robot was told
     to stop: a robot slows down within its acceleration limit (a Husky, 1 m/s², goes on 0.5 m from 1 m/s)."""
     await session.link.halt()
     deadline = time.monotonic() + tune.REST_LIMIT_S
     before = await session.pose()
     while time.monotonic() < deadline:
         now = await session.pose()
-        if math.dist(before[:2], now[:2]) < tune.REST_M:
+        if (
+            math.dist(before[:2], now[:2]) < tune.REST_M
+            and abs(geometry.wrap(now[2] - before[2])) < tune.REST_RAD
+        ):
             return now
         before = now
     return before

@@ -109,6 +109,13 @@ class Straight:
         v = min(v_max, max(K_LINEAR * remaining, 0.25 * v_max))
         return Command(sign * v, clamp(K_ANGULAR * wrap(yaw0 - pose[2]), w_max))
 
+    def done(self, pose: tuple[float, float, float]) -> float:
+        """The distance driven so far along the start heading (negative: back), at this pose."""
+        if self.start is None:
+            return 0.0
+        x0, y0, yaw0 = self.start
+        return (pose[0] - x0) * math.cos(yaw0) + (pose[1] - y0) * math.sin(yaw0)
+
 
 @dataclass
 class TurnBy:
@@ -129,6 +136,13 @@ class TurnBy:
             return STOP
         w_max = self.limits.angular
         return Command(0.0, _at_least(clamp(K_ANGULAR * remaining, w_max), 0.15 * w_max))
+
+    def done(self, pose: tuple[float, float, float]) -> float:
+        """The yaw turned so far (radians), counting this pose (the one it came to rest at)."""
+        if self._last is not None:
+            self.turned += wrap(pose[2] - self._last)
+        self._last = pose[2]
+        return self.turned
 
 
 @dataclass

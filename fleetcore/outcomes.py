@@ -9,6 +9,11 @@ A robot sent to a place has
   taken by husky"; "A was taken when it came" when nobody stands there now; "A has no room for it" when the
   place is too tight for the robot);
 - stopped elsewhere: anywhere else ("stopped 0.8 m north of A"); the step has not done what was asked.
+
+A robot told to turn or move by an amount is said to have done what its odometry measured once at rest: the
+amount asked when it is within SAID_AS_ASKED_DEG or SAID_AS_ASKED_M of it ("turned 90° left"), else the measure
+with what was asked ("turned 104° left (90° left asked)": a robot whose control ticks came late under load slowed
+down past its mark).
 """
 
 from __future__ import annotations
@@ -23,6 +28,8 @@ TOLERANCE_M = 0.25  # m from a place a robot is at it: nav stacks stop within 0.
 HERE_M = 0.05  # m: nearer than this, a spot is the place itself in words
 
 ARRIVED, FREE_SPOT, STOPPED = "arrived", "free spot", "stopped"
+SAID_AS_ASKED_DEG = 3.0  # a turn within this of what was asked is said as asked
+SAID_AS_ASKED_M = 0.03  # a move by an amount within this of what was asked is said as asked
 
 
 @dataclass(frozen=True)
@@ -78,3 +85,27 @@ def judge(
 def robot_line(name: str, status: str, words: str) -> str:
     """One robot's share of an instruction as the answer gives it: "robot1: succeeded (arrived at A)"."""
     return f"{name}: {status}" + (f" ({words})" if words else "")
+
+
+def turned(asked_deg: float, done_deg: float) -> str:
+    """A turn on the spot in words: as asked when it measured within SAID_AS_ASKED_DEG of it, else the measure
+    ("turned 104° left (90° left asked)"). Left is anticlockwise (positive)."""
+
+    def amount(degrees: float) -> str:
+        return f"{abs(degrees):.0f}° {'left' if degrees >= 0 else 'right'}"
+
+    if abs(done_deg - asked_deg) <= SAID_AS_ASKED_DEG:
+        return f"turned {abs(asked_deg):g}° {'left' if asked_deg >= 0 else 'right'}"
+    return f"turned {amount(done_deg)} ({amount(asked_deg)} asked)"
+
+
+def moved(asked_m: float, done_m: float) -> str:
+    """A move straight by an amount in words, as turned() says a turn ("moved 1.12 m forward (1 m forward
+    asked)")."""
+
+    def amount(metres: float, digits: int = 2) -> str:
+        return f"{round(abs(metres), digits):g} m {'forward' if metres >= 0 else 'back'}"
+
+    if abs(done_m - asked_m) <= SAID_AS_ASKED_M:
+        return f"moved {amount(asked_m, 3)}"
+    return f"moved {amount(done_m)} ({amount(asked_m, 3)} asked)"

@@ -52,6 +52,7 @@ MAX_REROUTES = 4  # robots standing gone round on one trip before it fails ("no 
 MAX_GIVE_WAYS = 8
 BACK_OFF_M = 0.4  # m a robot breaking a deadlock drives away from the others first (_back_off)
 REST_M = 0.002  # m between two odometry poses of a robot at rest
+REST_RAD = 0.004  # rad between them: a robot turning on the spot is not at rest for standing where it was
 REST_LIMIT_S = 2.0  # s a robot told to stop may take to come to rest
 
 # Driving a route: corners, nav stacks and their pace

@@ -129,3 +129,23 @@ def test_where_a_step_ended_is_read_once_the_robot_is_at_rest_not_as_it_was_told
     session = CoastingSession([1.00, 1.04, 1.07, 1.09, 1.10, 1.10])
     assert asyncio.run(at_rest(session)) == (1.10, 0.0, 0.0)  # not 1.00, where it was when told to stop
     assert session.sent == ["halt"]
+
+
+class SpinningSession(StuckSession):
+    """Odometry of a robot told to stop while turning on the spot: it stands where it was, still turning."""
+
+    def __init__(self, yaws):
+        super().__init__()
+        self.yaws = iter(yaws)
+        self.yaw = 0.0
+
+    async def pose(self):
+        self.yaw = next(self.yaws, self.yaw)
+        return (1.0, 0.0, self.yaw)
+
+
+def test_a_robot_turning_on_the_spot_is_not_at_rest_until_it_stops_turning():
+    """A turn's outcome is said from where it came to rest: a robot that stands where it was but still turns
+    (slowing down within its acceleration limit) is not at rest yet."""
+    session = SpinningSession([1.50, 1.58, 1.64, 1.68, 1.70, 1.70])
+    assert asyncio.run(at_rest(session)) == (1.0, 0.0, 1.70)  # not 1.50: it turned on 0.2 rad after the stop

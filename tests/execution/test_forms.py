@@ -2,6 +2,7 @@
 judged by what the simulated robot does: displacement, yaw change, dwell time, the places it visits."""
 
 import math
+import re
 import threading
 import time
 
@@ -114,15 +115,23 @@ def test_the_fleets_last_pose_of_a_robot_is_where_its_instruction_left_it(turtle
     assert math.dist((kept["x"], kept["y"]), here[:2]) < 0.01, (kept, here)
 
 
+def said_degrees(instruction) -> float:
+    """The signed degrees an instruction's outcome says the robot turned ("turned 104° left (90° left asked)")."""
+    degrees, side = re.search(r"turned (\d+)° (left|right)", instruction.outcome).groups()
+    return float(degrees) * (1 if side == "left" else -1)
+
+
 def test_turn_left_then_right_by_degrees(turtle_world, fleet_admin):
     start = pose(turtle_world)
     with Track(turtle_world) as track:
-        run("turn turtlebot left", fleet_admin)
+        left = run("turn turtlebot left", fleet_admin)
     assert abs(track.turned() - 90) < 8
+    assert abs(said_degrees(left) - track.turned()) < 4  # the words say what the robot did
     assert math.dist(start[:2], pose(turtle_world)[:2]) < 0.1  # on the spot
     with Track(turtle_world) as track:
-        run("rotate turtlebot right by forty five degrees", fleet_admin)
+        right = run("rotate turtlebot right by forty five degrees", fleet_admin)
     assert abs(track.turned() + 45) < 8
+    assert abs(said_degrees(right) - track.turned()) < 4
 
 
 def test_go_wait_then_go_dwells_and_visits_in_order(turtle_world, fleet_admin):

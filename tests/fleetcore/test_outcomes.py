@@ -48,3 +48,13 @@ def test_a_free_spot_keeps_its_place_and_who_took_it_through_the_step_contract()
     assert Step.from_dict(step.to_dict()) == step
     plain = Step.from_dict({"action": "move", "robots": ["r"], "destination": {"name": "B", "x": 1, "y": 2}})
     assert plain.destination.place == ("B", (1.0, 2.0)) and "center" not in plain.to_dict()["destination"]
+
+
+def test_a_turn_or_move_by_an_amount_is_said_as_its_odometry_measured_it_at_rest():
+    assert outcomes.turned(90, 91.4) == "turned 90° left"  # within SAID_AS_ASKED_DEG: as asked
+    assert outcomes.turned(90, 104.4) == "turned 104° left (90° left asked)"
+    assert outcomes.turned(-45, -44.0) == "turned 45° right"
+    assert outcomes.turned(-45, 2.0) == "turned 2° left (45° right asked)"
+    assert outcomes.moved(1.0, 1.02) == "moved 1 m forward"
+    assert outcomes.moved(-0.5, -0.62) == "moved 0.62 m back (0.5 m back asked)"
+    assert outcomes.moved(0.25, 0.1) == "moved 0.1 m forward (0.25 m forward asked)"
