@@ -105,6 +105,7 @@ def resolve_robots(
     if missing:
         raise Refused(f"No robot named {', '.join(missing)} is registered.")
     robots = [found[name] for name in names]
+    slots = slots_now(robots, moment) if check_schedule else {}  # one query for all of them
     for robot in robots:
         if robot.link_status != Robot.Link.ONLINE:
             raise Refused(f"{robot.name} is {robot.link_status}; it cannot take instructions now.")
@@ -112,7 +113,7 @@ def resolve_robots(
             raise Refused(
                 f"{robot.name} cannot {step.action}: it {unbound}; choose one on its registration page."
             )
-        slot = active_slot(robot, moment) if check_schedule else None
+        slot = slots.get(robot.pk)
         if slot is not None:
             raise Refused(
                 f"{robot.name} is busy with its schedule {describe_slot(slot)}; it is free from {slot.end:%H:%M}."
@@ -355,9 +356,10 @@ def _check_access(robots, user, source: str) -> None:
         except ControlRefused as exc:
             raise Refused(str(exc)) from None
     if user is not None:
+        held_by = leases.holders([robot.pk for robot in robots], known=user)  # one query for all of them
         for robot in robots:
             try:
-                check_command(user, robot)
+                check_command(user, robot, held_by.get(robot.pk))
             except ControlRefused as exc:
                 raise Refused(str(exc)) from None
 

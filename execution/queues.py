@@ -38,20 +38,44 @@ def running_first():
 def robot_queue(robot: Robot) -> dict:
     """What the robot runs now (its step "2 of 3", the distance left to a move's goal from its last pose, an
     ETA at the step's speed) and what waits behind it, in queue order: the API's and the page's task list."""
-    rows = list(
-        Execution.objects.filter(robot=robot, status__in=ACTIVE)
+    return robot_queues([robot])[0]
+
+
+def robot_queues(robots) -> list[dict]:
+    """robot_queue of each of these robots, read at once: one query and one read of the last poses for all
+    (an instruction to 50 robots pushed 50 task lists at three round trips each: most of its POST's 2 s)."""
+    robots = list(robots)
+    rows: dict[int, list[Execution]] = {robot.pk: [] for robot in robots}
+    for row in (
+        Execution.objects.filter(robot_id__in=list(rows), status__in=ACTIVE)
         .select_related("instruction__user")
         .order_by(running_first(), "queued_at", "pk")
-    )
-    running = next((row for row in rows if row.status == Execution.Status.RUNNING), None)
-    waiting = [row for row in rows if row is not running]
-    pose = pose_store.last_poses([robot.pk]).get(robot.pk)
-    return {
-        "robot": robot.name,
-        "id": robot.pk,
-        "running": _entry(running, robot, pose) if running else None,
-        "queued": [_entry(row, robot, None, position) for position, row in enumerate(waiting, start=1)],
+    ):
+        rows[row.robot_id].append(row)
+    running = {
+        pk: next((row for row in own if row.status == Execution.Status.RUNNING), None)
+        for pk, own in rows.items()
     }
+    poses = (
+        pose_store.last_poses([pk for pk, row in running.items() if row is not None])
+        if any(running.values())
+        else {}
+    )
+    out = []
+    for robot in robots:
+        now = running[robot.pk]
+        waiting = [row for row in rows[robot.pk] if row is not now]
+        out.append(
+            {
+                "robot": robot.name,
+                "id": robot.pk,
+                "running": _entry(now, robot, poses.get(robot.pk)) if now else None,
+                "queued": [
+                    _entry(row, robot, None, position) for position, row in enumerate(waiting, start=1)
+                ],
+            }
+        )
+    return out
 
 
 def _entry(row: Execution, robot: Robot, pose: dict | None, position: int = 0) -> dict:
@@ -141,10 +165,10 @@ def _swap(a: Execution, b: Execution) -> None:
 def all_queues() -> list[dict]:
     """Every robot's queue that has something in it (the dashboard's first state)."""
     busy = Execution.objects.filter(status__in=ACTIVE).values_list("robot_id", flat=True).distinct()
-    return [robot_queue(robot) for robot in Robot.objects.filter(pk__in=list(busy)).order_by("name")]
+    return robot_queues(Robot.objects.filter(pk__in=list(busy)).order_by("name"))
 
 
 def push_queues(robot_ids) -> None:
     """Push the queues of these robots to the pages (after the commit): their task lists changed."""
-    for robot in Robot.objects.filter(pk__in=list(robot_ids)):
-        live.queue(robot_queue(robot))
+    for queue in robot_queues(Robot.objects.filter(pk__in=list(robot_ids))):
+        live.queue(queue)
