@@ -33,9 +33,10 @@ import json
 import math
 import multiprocessing
 import os
+import re
 import sys
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from pathlib import Path
 
 import psutil
@@ -44,7 +45,7 @@ import websockets
 from bench import frames
 from bench import report as report_file
 from deploy.cluster import Cluster, down, host_pids, reason_unavailable
-from deploy.cluster_client import Portal
+from deploy.cluster_client import Odometry, Portal
 from experiments.stats import summarize
 from portal.fanout import decode
 
@@ -54,6 +55,12 @@ STOP_WAIT_S = 5.0  # a stop trial's zeros not all seen by then: the next trial g
 # and drops the oldest beyond (logged): one link for a shard's 500 robots could lose some of a burst's commands.
 RECEPTION_CHUNK = 100
 DECODED = 5  # dashboards that decode every pose (robots seen, staleness); the rest count poses per batch
+INSTRUCTION_CHUNK = 50  # robots per instruction when every robot is instructed (a page's selection)
+ODOMETRY_MS = 1000  # the instructed phase's odometry watch, per robot (throttled at the shards)
+SAID_WITHIN_DEG = 5.0  # an outcome's degrees this near the shard's odometry (1 Hz, read at rest) are true
+TURN_TOLERANCE_DEG = 10.0  # a robot told to turn 90 degrees that turned 80 to 100 did it
+SETTLE_WAIT_S = 120.0  # an instructed phase's instructions not final by then: reported as they are
+FINAL = {"succeeded", "failed", "cancelled", "refused", "answered"}
 LIVE_S = 12.0  # seconds the dashboards read poses, while every robot turns
 OUT = Path(__file__).resolve().parent / "results" / "cluster"
 GOALS = {  # issue 19, for 1,000 robots
@@ -112,10 +119,10 @@ class Reception:
             raise RuntimeError("bench.cluster: the cmd_vel reception did not subscribe within 60 s")
 
     async def first_of(
-        self, since: dict[str, float], angular: float, until: float = math.inf
+        self, since: dict[str, float], angular: float | None, until: float = math.inf
     ) -> dict[str, float | None]:
-        """For each robot, when the first Twist with this angular speed since its time (and before until) was seen
-        (None: not seen)."""
+        """For each robot, when the first Twist with this angular speed (None: any but zero) since its time (and
+        before until) was seen (None: not seen)."""
         return await asyncio.to_thread(self._ask, ("first", since, angular, until))
 
     async def stop(self) -> list[dict]:
@@ -129,9 +136,10 @@ class Reception:
         return self._pipe.recv()
 
     # the process's side
-    def first(self, name: str, since: float, angular: float, until: float = math.inf) -> float | None:
+    def first(self, name: str, since: float, angular: float | None, until: float = math.inf) -> float | None:
+        """angular None: any turning Twist (an executor's, whose speeds are its own)."""
         for t, z in self.times.get(name, ()):
-            if since <= t < until and abs(z - angular) < 1e-6:
+            if since <= t < until and (abs(z) > 1e-6 if angular is None else abs(z - angular) < 1e-6):
                 return t
         return None
 
@@ -358,6 +366,7 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
             else:
                 latencies.append((got - sent[name]) * 1000)
     late = sum(ms > ROUND_WAIT_S * 1000 for ms in latencies)
+    under_instructions = await instructed(cluster, portal, reception, ids, commanders[0])
     gaps = await reception.stop()
     live = await asyncio.to_thread(results.recv) if await asyncio.to_thread(results.poll, 60) else {}
     dashboards.join(10)
@@ -376,6 +385,7 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
             "to_last_robot_max": max(stop_each, default=None),
         },
         "live": live,
+        "instructions": under_instructions,
         "cpu_cores": {**cpu, "total": round(sum(cpu.values()), 3)},
         # what the CPU window held: per press and per robot stopped is the cost model's "doing" (docs/scale.md)
         "cpu_window": {
@@ -384,6 +394,131 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
             "robots_stopped": 3 * len(names),
         },
     }
+
+
+async def instructed(cluster: Cluster, portal: Portal, reception: Reception, ids: dict[str, int], ws) -> dict:
+    """Every robot moved under instructions (not teleop), then stopped mid-instruction (issue 35, deliver 4).
+
+    turn: "turn left 90 degrees" to every robot (INSTRUCTION_CHUNK robots per instruction, through the API as a
+    page's selection sends it); started = the instruction posted -> the robot's executor's first turning Twist at
+    its shard; settled = every instruction final; turned = the robots whose own odometry (at the shard) turned
+    90 +- TURN_TOLERANCE_DEG. stop: "turn left 720 degrees" to every robot, the dashboard's STOP once most turn
+    -> the first zero Twist at each robot, every instruction final, every robot's odometry at rest."""
+    names = sorted(ids)
+    shards = {cluster.sim_url(h): cluster.shard_robots(h) for h in ("sim1", "sim2")}
+    with Odometry(shards, period_ms=ODOMETRY_MS) as odometry:
+        await asyncio.to_thread(portal.post, "instructions", {"text": "release all robots"})
+        await wait_until(lambda: odometry.at_rest(names, within=3 * ODOMETRY_MS / 1000), 30)
+        before = {name: odometry.motion[name].yaw for name in names}
+        turn, sent = await instruct(portal, "turn left 90 degrees", ids)
+        settled = await settle(portal, turn["ids"])
+        started = await reception.first_of(sent, None)
+        await asyncio.sleep(3 * ODOMETRY_MS / 1000)  # the last odometry of every robot, at rest
+        turned = {name: math.degrees(wrapped(odometry.motion[name].yaw - before[name])) for name in names}
+        said = await said_turns(portal, turn["ids"])
+        turn.update(
+            started_ms=summarize([(t - sent[name]) * 1000 for name, t in started.items() if t is not None]),
+            not_started=sorted(name for name, t in started.items() if t is None)[:50],
+            **settled,
+            turned_deg=summarize(list(turned.values())),
+            turned_ok=sum(abs(d - 90) <= TURN_TOLERANCE_DEG for d in turned.values()),
+            turned_off=sorted(name for name, d in turned.items() if abs(d - 90) > TURN_TOLERANCE_DEG)[:50],
+            # the outcome's words against the shard's odometry: a robot said to have turned what it turned
+            said_true=sum(abs(said[n] - turned[n]) <= SAID_WITHIN_DEG for n in names if n in said),
+            said_false=sorted(n for n in names if n in said and abs(said[n] - turned[n]) > SAID_WITHIN_DEG)[
+                :50
+            ],
+            said_none=sorted(n for n in names if n not in said)[:50],
+        )
+        print(f"bench.cluster: under instructions: {turn}", flush=True)
+        t1 = time.time()
+        stop, _ = await instruct(portal, "turn left 720 degrees", ids)
+        turning = await wait_until(
+            lambda: sum(odometry.motion[n].speed > 0.05 for n in names) >= 0.9 * len(names), 60
+        )
+        t2 = time.time()
+        await ws.send(json.dumps({"command": "stop", "robots": [ids[n] for n in names]}))
+        zeros = dict.fromkeys(names)
+        deadline = time.monotonic() + STOP_WAIT_S
+        while time.monotonic() < deadline and not all(zeros.values()):
+            await asyncio.sleep(0.25)
+            zeros = await reception.first_of(dict.fromkeys(names, t2), 0.0)
+        settled = await settle(portal, stop["ids"])
+        rest = await wait_until(lambda: odometry.at_rest(names, within=3 * ODOMETRY_MS / 1000), 30)
+        stop.update(
+            turning_s=round(t2 - t1, 2),
+            turning_before_stop=turning,
+            zeros_ms={
+                **summarize([(t - t2) * 1000 for t in zeros.values() if t is not None]),
+                "missing": sum(t is None for t in zeros.values()),
+            },
+            **settled,
+            at_rest_s=rest and round(time.time() - t2, 2),
+            moving_after=odometry.moving(names)[:50],
+        )
+        print(f"bench.cluster: stopped under instructions: {stop}", flush=True)
+    return {"turn": turn, "stop": stop}
+
+
+async def instruct(portal: Portal, text: str, ids: dict[str, int]) -> tuple[dict, dict[str, float]]:
+    """The text to these robots, INSTRUCTION_CHUNK at a time, as a page's selection (POST /api/instructions):
+    what was posted, and when each robot's instruction was sent."""
+    names = sorted(ids)
+    posted, sent = [], {}
+    for i in range(0, len(names), INSTRUCTION_CHUNK):
+        chunk = names[i : i + INSTRUCTION_CHUNK]
+        at = time.time()
+        body = {"text": text, "robot_ids": [ids[name] for name in chunk]}
+        posted.append(await asyncio.to_thread(portal.post, "instructions", body))
+        sent.update(dict.fromkeys(chunk, at))
+    summary = {
+        "text": text,
+        "instructions": len(posted),
+        "ids": [p["id"] for p in posted],
+        "at_post": dict(Counter(p["status"] for p in posted)),
+    }
+    return summary, sent
+
+
+async def said_turns(portal: Portal, instruction_ids: list[int]) -> dict[str, float]:
+    """{robot: the degrees its instruction's outcome says it turned} ("robot7: succeeded (turned 104° left ...")."""
+    said = {}
+    for pk in instruction_ids:
+        outcome = (await asyncio.to_thread(portal.get, f"instructions/{pk}"))["outcome"]
+        for name, degrees, side in re.findall(r"(\w+): succeeded \(turned (\d+)° (left|right)", outcome):
+            said[name] = float(degrees) * (1 if side == "left" else -1)
+    return said
+
+
+async def settle(portal: Portal, instruction_ids: list[int]) -> dict:
+    """Wait until every instruction is final (SETTLE_WAIT_S at most): how long, and their statuses then."""
+    t0 = time.monotonic()
+    while True:
+        statuses = [
+            (await asyncio.to_thread(portal.get, f"instructions/{pk}"))["status"] for pk in instruction_ids
+        ]
+        if all(status in FINAL for status in statuses) or time.monotonic() - t0 > SETTLE_WAIT_S:
+            break
+        await asyncio.sleep(0.5)
+    done = all(status in FINAL for status in statuses)
+    return {
+        "settled_s": round(time.monotonic() - t0, 2) if done else None,
+        "statuses": dict(Counter(statuses)),
+    }
+
+
+async def wait_until(condition, seconds: float) -> bool:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        await asyncio.sleep(0.25)
+    return condition()
+
+
+def wrapped(angle: float) -> float:
+    """An angle difference in [-pi, pi) (a robot that turned 90 degrees, whatever its start yaw)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def run_size(robots: int, clients: int, rounds: int, out: Path, keep: bool = False) -> dict:
@@ -467,6 +602,7 @@ def report(out: Path = OUT) -> dict:
                 "registered": r["registered"],
                 "cpu_ms_per_s_per_robot": round(1000 * r["cpu_cores"]["total"] / max(1, r["registered"]), 2),
                 "load_average_at_start": r["load_average_at_start"],
+                "instructions": instructed_row(r.get("instructions")),
             }
             for r in sizes
         },
@@ -477,6 +613,29 @@ def report(out: Path = OUT) -> dict:
     if (out.parent / report_file.RUN_FILE).exists():  # bench/results/REPORT.md carries this section too
         report_file.render_all(out.parent)
     return summary
+
+
+def instructed_row(measured: dict | None) -> dict | None:
+    """The instructed phase's figures for the summary (None: a run from before it, 2026-11-29)."""
+    if not measured:
+        return None
+    turn, stop = measured["turn"], measured["stop"]
+    return {
+        "started_s": {k: _s(turn["started_ms"][k]) for k in ("p50", "p99", "max")},
+        "not_started": len(turn["not_started"]),
+        "settled_s": turn["settled_s"],
+        "statuses": turn["statuses"],
+        "turned_ok": turn["turned_ok"],
+        "said_true": turn["said_true"],
+        "stop_zeros_ms": {k: stop["zeros_ms"][k] for k in ("p99", "max", "missing")},
+        "stop_statuses": stop["statuses"],
+        "stop_settled_s": stop["settled_s"],
+        "at_rest_s": stop["at_rest_s"],
+    }
+
+
+def _s(ms: float | None) -> float | None:
+    return None if ms is None else round(ms / 1000, 2)
 
 
 def markdown(summary: dict) -> str:
@@ -502,6 +661,27 @@ def markdown(summary: dict) -> str:
             f"| {live['robots_seen_per_client_min']} | {live.get('hz_per_robot_min')} / {live['hz_per_robot_p50']} | {live['staleness_p99_ms']} "
             f"| {r['cpu_cores_total']} | {r['cpu_ms_per_s_per_robot']} | {r['load_average_at_start'][0]} |"
         )
+    instructed = {n: r["instructions"] for n, r in rows.items() if r.get("instructions")}
+    if instructed:
+        lines += [
+            "",
+            'Under instructions (after the teleop rounds): "turn left 90 degrees" to every robot, '
+            f"{INSTRUCTION_CHUNK} robots an instruction (POST /api/instructions), judged by each shard's odometry; "
+            'then "turn left 720 degrees" and the dashboard\'s STOP once 90 % turn.',
+            "",
+            "| robots | started p50 / p99 / max (s) | not started | all settled (s) | instructions | turned 90 ± "
+            f"{TURN_TOLERANCE_DEG:g}° | outcome says what odometry measured (± {SAID_WITHIN_DEG:g}°) "
+            "| stop: zeros p99 / last (ms), missing | instructions after the stop | settled / at rest (s) |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for n, i in instructed.items():
+            st, z = i["started_s"], i["stop_zeros_ms"]
+            lines.append(
+                f"| {n} | {st['p50']} / {st['p99']} / {st['max']} | {i['not_started']} | {i['settled_s']} "
+                f"| {i['statuses']} | {i['turned_ok']} of {n} | {i['said_true']} of {n} "
+                f"| {z['p99']} / {z['max']}, {z['missing']} | {i['stop_statuses']} "
+                f"| {i['stop_settled_s']} / {i['at_rest_s']} |"
+            )
     goals = summary["goals_for_1000"]
     lines += [
         "",

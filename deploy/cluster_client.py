@@ -76,6 +76,7 @@ class Motion:
     y: float = math.nan
     speed: float = 0.0  # |linear| + |angular| of the last odometry
     at: float = 0.0  # time.monotonic() of the last odometry
+    yaw: float = math.nan  # radians, in the odometry's frame
 
 
 class Odometry:
@@ -100,8 +101,8 @@ class Odometry:
         now = time.monotonic()
         return all(now - self.motion[name].at < within for name in names)
 
-    def at_rest(self, names, speed: float = 0.01) -> bool:
-        return self.fresh(names) and all(self.motion[name].speed < speed for name in names)
+    def at_rest(self, names, speed: float = 0.01, within: float = 1.0) -> bool:
+        return self.fresh(names, within) and all(self.motion[name].speed < speed for name in names)
 
     def moving(self, names, speed: float = 0.02) -> list[str]:
         return [name for name in names if self.motion[name].speed >= speed]
@@ -135,6 +136,8 @@ class Odometry:
             return
         name = message["topic"].split("/")[1]
         odometry = message["msg"]
-        position, twist = odometry["pose"]["pose"]["position"], odometry["twist"]["twist"]
+        pose, twist = odometry["pose"]["pose"], odometry["twist"]["twist"]
+        position, turn = pose["position"], pose["orientation"]
         speed = math.hypot(twist["linear"]["x"], twist["linear"]["y"]) + abs(twist["angular"]["z"])
-        self.motion[name] = Motion(position["x"], position["y"], speed, time.monotonic())
+        yaw = 2 * math.atan2(turn["z"], turn["w"])  # a planar robot's quaternion
+        self.motion[name] = Motion(position["x"], position["y"], speed, time.monotonic(), yaw)
