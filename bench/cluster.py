@@ -415,7 +415,7 @@ async def instructed(cluster: Cluster, portal: Portal, reception: Reception, ids
         started = await reception.first_of(sent, None)
         await asyncio.sleep(3 * ODOMETRY_MS / 1000)  # the last odometry of every robot, at rest
         turned = {name: math.degrees(wrapped(odometry.motion[name].yaw - before[name])) for name in names}
-        said = await said_turns(portal, turn["ids"])
+        said, failures = await said_turns(portal, turn["ids"])
         turn.update(
             started_ms=summarize([(t - sent[name]) * 1000 for name, t in started.items() if t is not None]),
             not_started=sorted(name for name, t in started.items() if t is None)[:50],
@@ -429,6 +429,7 @@ async def instructed(cluster: Cluster, portal: Portal, reception: Reception, ids
                 :50
             ],
             said_none=sorted(n for n in names if n not in said)[:50],
+            failures=failures,
         )
         print(f"bench.cluster: under instructions: {turn}", flush=True)
         t1 = time.time()
@@ -480,14 +481,17 @@ async def instruct(portal: Portal, text: str, ids: dict[str, int]) -> tuple[dict
     return summary, sent
 
 
-async def said_turns(portal: Portal, instruction_ids: list[int]) -> dict[str, float]:
-    """{robot: the degrees its instruction's outcome says it turned} ("robot7: succeeded (turned 104° left ...")."""
-    said = {}
+async def said_turns(portal: Portal, instruction_ids: list[int]) -> tuple[dict[str, float], dict[str, int]]:
+    """{robot: the degrees its instruction's outcome says it turned} ("robot7: succeeded (turned 104° left ..."),
+    and the reasons of the robots' failures, counted (robot names taken out)."""
+    said, failed = {}, Counter()
     for pk in instruction_ids:
         outcome = (await asyncio.to_thread(portal.get, f"instructions/{pk}"))["outcome"]
         for name, degrees, side in re.findall(r"(\w+): succeeded \(turned (\d+)° (left|right)", outcome):
             said[name] = float(degrees) * (1 if side == "left" else -1)
-    return said
+        for reason in re.findall(r"\w+: failed \((.*?)\)(?:; |$)", outcome):
+            failed[re.sub(r"robot\d+", "robotN", reason)[:160]] += 1
+    return said, dict(failed.most_common(5))
 
 
 async def settle(portal: Portal, instruction_ids: list[int]) -> dict:

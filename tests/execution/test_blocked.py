@@ -112,40 +112,28 @@ def _known(robot) -> bool:
     return robot.pk in last_poses([robot.pk])
 
 
-class CoastingSession(StuckSession):
-    """Odometry of a robot told to stop that coasts on, slower each message, then stands."""
+class ScriptedSession(StuckSession):
+    """Odometry read from a script of poses (x, y, yaw), the last one repeated."""
 
-    def __init__(self, steps):
+    def __init__(self, poses):
         super().__init__()
-        self.xs = iter(steps)
-        self.x = 0.0
+        self.poses = iter(poses)
+        self.now = None
 
     async def pose(self):
-        self.x = next(self.xs, self.x)
-        return (self.x, 0.0, 0.0)
+        self.now = next(self.poses, self.now)
+        return self.now
 
 
 def test_where_a_step_ended_is_read_once_the_robot_is_at_rest_not_as_it_was_told_to_stop():
-    session = CoastingSession([1.00, 1.04, 1.07, 1.09, 1.10, 1.10])
+    # a robot told to stop that coasts on, slower each message, then stands
+    session = ScriptedSession([(x, 0.0, 0.0) for x in (1.00, 1.04, 1.07, 1.09, 1.10, 1.10)])
     assert asyncio.run(at_rest(session)) == (1.10, 0.0, 0.0)  # not 1.00, where it was when told to stop
     assert session.sent == ["halt"]
-
-
-class SpinningSession(StuckSession):
-    """Odometry of a robot told to stop while turning on the spot: it stands where it was, still turning."""
-
-    def __init__(self, yaws):
-        super().__init__()
-        self.yaws = iter(yaws)
-        self.yaw = 0.0
-
-    async def pose(self):
-        self.yaw = next(self.yaws, self.yaw)
-        return (1.0, 0.0, self.yaw)
 
 
 def test_a_robot_turning_on_the_spot_is_not_at_rest_until_it_stops_turning():
     """A turn's outcome is said from where it came to rest: a robot that stands where it was but still turns
     (slowing down within its acceleration limit) is not at rest yet."""
-    session = SpinningSession([1.50, 1.58, 1.64, 1.68, 1.70, 1.70])
+    session = ScriptedSession([(1.0, 0.0, yaw) for yaw in (1.50, 1.58, 1.64, 1.68, 1.70, 1.70)])
     assert asyncio.run(at_rest(session)) == (1.0, 0.0, 1.70)  # not 1.50: it turned on 0.2 rad after the stop
