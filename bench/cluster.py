@@ -477,6 +477,12 @@ async def instruct(portal: Portal, text: str, ids: dict[str, int]) -> tuple[dict
         "instructions": len(posted),
         "ids": [p["id"] for p in posted],
         "at_post": dict(Counter(p["status"] for p in posted)),
+        # why, for those the portal refused at once (robot names taken out)
+        "refused_because": dict(
+            Counter(
+                re.sub(r"robot\d+", "robotN", p["outcome"])[:160] for p in posted if p["status"] == "refused"
+            )
+        ),
     }
     return summary, sent
 
