@@ -50,6 +50,18 @@ LISTEN_RETRY_S = 1.0  # the flags channel's subscription, lost, is made again af
 log = logging.getLogger(__name__)
 
 
+class NoAnswer(RedisError):
+    """The flags' read got no answer within its bound: Redis, or this process, too busy to tell which (an executor
+    starved of CPU reads its answers late too). Not "Redis unreachable": it may well be up."""
+
+
+def _read_failure(exc: BaseException) -> RedisError:
+    """What a failed read of the flags says: NoAnswer for a timeout, the Redis error itself, else unreachable."""
+    if isinstance(exc, TimeoutError | redis.exceptions.TimeoutError):
+        return NoAnswer(f"no answer within {REDIS_TIMEOUT_S * 2:g} s: Redis or this executor too busy")
+    return exc if isinstance(exc, RedisError) else RedisError(f"no answer from Redis ({exc})")
+
+
 class Lease:
     """A robot lock this process holds, kept by its board (renewed while the command loop beats)."""
 
@@ -180,7 +192,7 @@ class Board:
         try:
             answers = await asyncio.wait_for(pipe.execute(raise_on_error=False), REDIS_TIMEOUT_S * 2)
         except (RedisError, OSError, TimeoutError) as exc:
-            error = exc if isinstance(exc, RedisError) else RedisError(f"no answer from Redis ({exc})")
+            error = _read_failure(exc)
             for lease in leases:
                 lease._failed(error)
             return

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from django.utils import timezone
 
 from execution import blocking
-from execution.board import Lease
+from execution.board import Lease, NoAnswer
 from execution.link import RobotLink
 from execution.models import Execution, Instruction
 from fleetcore import faults, geometry
@@ -62,6 +62,7 @@ class Stalled(StepFailed):
 
 
 REDIS_LOST = "executor lost: Redis unreachable, so its lock on the robot cannot be kept"
+REDIS_LATE = "executor lost: Redis did not answer in time, so no stop could be seen and its lock not kept"
 
 
 class Interrupted(Exception):
@@ -157,7 +158,10 @@ class Session:
         lease.beat()
         if lease.error is not None:  # no stop flag or preemption can be seen, no lock kept: not ours to drive
             words = faults.refusal(lease.error)  # it answers, but refuses writes: halted, and that is why
-            raise Interrupted("failed", f"stopped; {words}" if words else f"{REDIS_LOST} ({lease.error})")
+            if words:
+                raise Interrupted("failed", f"stopped; {words}")
+            lost = REDIS_LATE if isinstance(lease.error, NoAnswer) else REDIS_LOST
+            raise Interrupted("failed", f"{lost} ({lease.error})")
         self._check_flags()
 
     def _check_flags(self) -> None:
