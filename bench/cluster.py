@@ -445,6 +445,9 @@ async def instructed(cluster: Cluster, portal: Portal, reception: Reception, ids
             await asyncio.sleep(0.25)
             zeros = await reception.first_of(dict.fromkeys(names, t2), 0.0)
         settled = await settle(portal, stop["ids"])
+        _, failures = await said_turns(
+            portal, stop["ids"]
+        )  # a stop should cancel: what failed instead, and why
         rest = await wait_until(lambda: odometry.at_rest(names, within=3 * ODOMETRY_MS / 1000), 30)
         stop.update(
             turning_s=round(t2 - t1, 2),
@@ -456,6 +459,7 @@ async def instructed(cluster: Cluster, portal: Portal, reception: Reception, ids
             **settled,
             at_rest_s=rest and round(time.time() - t2, 2),
             moving_after=odometry.moving(names)[:50],
+            failures=failures,
         )
         print(f"bench.cluster: stopped under instructions: {stop}", flush=True)
     return {"turn": turn, "stop": stop}
