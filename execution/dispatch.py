@@ -57,12 +57,6 @@ def local_time(moment=None):
     return timezone.localtime(moment or timezone.now()).time()
 
 
-def active_slot(robot: Robot, moment=None) -> TimeSlot | None:
-    """The robot's enabled time slot covering this moment, if any."""
-    now = local_time(moment)
-    return TimeSlot.objects.running_at(now).filter(robot=robot).select_related("goal").first()
-
-
 def describe_slot(slot: TimeSlot) -> str:
     task = f" + {slot.task}" if slot.task else ""
     return f"{slot.start:%H:%M}-{slot.end:%H:%M} ({slot.goal.name}{task})"

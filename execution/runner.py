@@ -190,8 +190,7 @@ def _held_back(execution: Execution) -> bool:
     Execution.objects.filter(pk=execution.pk, status__in=WAITING).update(
         status=Execution.Status.CANCELLED, finished_at=timezone.now(), error=holds.refusal(robot)[:2000]
     )
-    if not settle(execution.instruction_id):
-        _push_instruction(execution.instruction_id, [execution.robot_id])
+    settle(execution.instruction_id, changed=execution.robot_id)
     return True
 
 
@@ -228,17 +227,19 @@ def finish(execution: Execution, token: str, outcome: str, words: str) -> bool:
         Robot.objects.transition(
             execution.robot_id, OUTCOME_EVENT[outcome], words[:255], execution.instruction_id
         )
-        if not settle(execution.instruction_id, words if outcome == "succeeded" else ""):
-            _push_instruction(execution.instruction_id, [execution.robot_id])  # its share ended; others run
+        settle(execution.instruction_id, words if outcome == "succeeded" else "", changed=execution.robot_id)
     return bool(won)
 
 
-def settle(instruction_id: int, note: str = "") -> bool:
-    """Give the instruction its final status once every robot's share has one (and push it with every robot's
-    task list): whether it did."""
+def settle(instruction_id: int, note: str = "", changed: int | None = None) -> None:
+    """Give the instruction its final status once every robot's share has one, pushed with every robot's task
+    list; until then, push it with the task list of the robot whose share `changed` (a claim or an end changes
+    that robot's list only)."""
     rows = list(Execution.objects.filter(instruction_id=instruction_id).select_related("robot"))
     if not rows or any(row.status not in FINAL for row in rows):
-        return False
+        if changed is not None:
+            _push_instruction(instruction_id, [changed])
+        return
     found = {row.status for row in rows}
     if Execution.Status.FAILED in found:
         status = Instruction.Status.FAILED
@@ -254,19 +255,14 @@ def settle(instruction_id: int, note: str = "") -> bool:
     Instruction.objects.filter(pk=instruction_id).exclude(status__in=Instruction.FINAL).update(
         status=status, finished_at=timezone.now(), outcome=outcome[:4000]
     )
-    _push_instruction(instruction_id)
-    return True
+    _push_instruction(instruction_id, [row.robot_id for row in rows])
 
 
-def _push_instruction(instruction_id: int, robot_ids: list[int] | None = None) -> None:
-    """The instruction to the pages, with the task lists of these robots (None: all of its robots). A robot's
-    claim or end changes its own list only: pushing every robot's on each of them made an instruction to N
-    robots cost N x N task lists, which starved an executor starting 50 robots until their locks lapsed."""
+def _push_instruction(instruction_id: int, robot_ids: list[int]) -> None:
+    """The instruction to the pages, with the task lists of these robots. A robot's claim or end changes its own
+    list only: pushing every robot's on each of them made an instruction to N robots cost N x N task lists, which
+    starved an executor starting 50 robots until their locks lapsed."""
     instruction = Instruction.objects.filter(pk=instruction_id).first()
     if instruction is not None:
         live.instruction(instruction)
-        if robot_ids is None:
-            robot_ids = Execution.objects.filter(instruction_id=instruction_id).values_list(
-                "robot_id", flat=True
-            )
         queues.push_queues(robot_ids)
