@@ -39,7 +39,7 @@ from django.conf import settings
 from redis.exceptions import RedisError, ResponseError
 
 from execution import blocking
-from execution.coordination import HEARTBEAT_S, LIVELY_S, RENEW, RobotLock, key
+from execution.coordination import HEARTBEAT_S, LIVELY_S, RELEASE, RENEW, RobotLock, key
 from fleetcore import faults
 from robots import poses as pose_store
 
@@ -157,6 +157,20 @@ class Board:
 
     def drop(self, lease: Lease) -> None:
         self.leases.discard(lease)
+
+    async def take(self, lock: RobotLock) -> Lease | None:
+        """Acquire the lock in one round trip on the loop and keep it from now on; None: someone holds it.
+        (Through the robots' blocking pool, an executor starting 50 robots queued each acquire behind the
+        others' database calls.) No answer within its bound raises: the lock, if it was set, lapses."""
+        taken = self._redis().set(lock.key, lock.token, nx=True, px=lock.ttl_ms)
+        return self.lease(lock) if await asyncio.wait_for(taken, REDIS_TIMEOUT_S * 2) else None
+
+    async def give_back(self, lease: Lease) -> None:
+        """Stop keeping the lease and release its lock (Redis away: it lapses within its time to live)."""
+        self.drop(lease)
+        with contextlib.suppress(RedisError, OSError, TimeoutError):
+            release = self._redis().eval(RELEASE, 1, lease.lock.key, lease.token)
+            await asyncio.wait_for(release, REDIS_TIMEOUT_S * 2)
 
     async def run(self) -> None:
         """Tick until cancelled, at once when a flag is raised; the renewals' thread meanwhile."""

@@ -120,6 +120,9 @@ class RobotLink:
         self.client = None
         self._subs = []
         self._planner_max = self._registered_planner_top()
+        # the links process's verdict on its odometry as the link is made (robots.poses), read here off the loop
+        # with the bindings: a robot flagged before its step fails at once (execution.steps.Session)
+        self.flagged: dict | None = pose_store.pose_faults([robot.pk]).get(robot.pk)
 
     # ----- lifecycle -----
     async def open(self) -> RobotLink:

@@ -170,5 +170,10 @@ def all_queues() -> list[dict]:
 
 def push_queues(robot_ids) -> None:
     """Push the queues of these robots to the pages (after the commit): their task lists changed."""
-    for queue in robot_queues(Robot.objects.filter(pk__in=list(robot_ids))):
+    push_robot_queues(Robot.objects.filter(pk__in=list(robot_ids)))
+
+
+def push_robot_queues(robots) -> None:
+    """push_queues of robots already read (a claim has its robot): one query for all their lists."""
+    for queue in robot_queues(robots):
         live.queue(queue)

@@ -15,6 +15,7 @@ import asyncio
 import contextlib
 import logging
 
+from django.db.models import F
 from django.utils import timezone
 
 import alerts
@@ -47,61 +48,87 @@ SHUT_DOWN = "stopped: its executor was shut down"
 
 
 async def drain_robot(robot_id: int) -> bool:
-    """Run the robot's waiting executions under its lock; False if another runner holds it."""
+    """Run the robot's waiting executions under its lock; False if another runner holds it or none waited.
+
+    It is started because work waits (a wake-up, the sweep), so it takes the lock first and looks for the work
+    under it; after a run it looks again before taking the lock anew (work queued while it ran, whose wake-up
+    found the robot's task still running). Each call through the blocking pool waits behind every other robot's
+    in the process: an executor starting 50 robots at once took 2 to 5 s to their first command with twice as
+    many calls per robot (bench.cluster, "under instructions")."""
     ran, kept = False, board.of_loop()
-    while await blocking.call(next_execution, robot_id) is not None:
-        lock = coordination.RobotLock(robot_id)
-        if not await blocking.call(lock.acquire):
+    while True:
+        lease = await kept.take(coordination.RobotLock(robot_id))
+        if lease is None:
             return ran
-        ran = True
-        lease = kept.lease(lock)
+        found, preferred = False, None
         try:
-            await lease.fresh()  # the flags as of now (a stop that came before the lock is seen)
-            preferred = None
             while lease.held and (execution := await blocking.call(next_execution, robot_id, preferred)):
+                found = ran = True
                 lease.beat()
                 preferred = await run_execution(execution, lease)
         finally:
-            kept.drop(lease)
-            with contextlib.suppress(Exception):  # Redis away: the lock lapses within its time to live
-                await asyncio.shield(blocking.call(lock.release))
-    return ran
+            await asyncio.shield(kept.give_back(lease))
+        if not found or await blocking.call(next_execution, robot_id) is None:
+            return ran
 
 
 def next_execution(robot_id: int, preferred: int | None = None) -> Execution | None:
-    """The preemptor if one is named, else the first in the robot's queue (oldest, unless a person moved it)."""
+    """The preemptor if one is named, else the first in the robot's queue (oldest, unless a person moved it);
+    with its robot, and its instruction's status as `instruction_status` (what the claim needs)."""
     _, flagged = coordination.flags(robot_id)
+    waiting = (
+        Execution.objects.filter(robot_id=robot_id, status__in=WAITING)
+        .select_related("robot")
+        .annotate(instruction_status=F("instruction__status"))
+    )
     for pk in (preferred, flagged):
         if pk is not None:
-            found = Execution.objects.filter(pk=pk, robot_id=robot_id, status__in=WAITING).first()
+            found = waiting.filter(pk=pk).first()
             if found is not None:
                 return found
-    return Execution.objects.filter(robot_id=robot_id, status__in=WAITING).order_by("queued_at", "pk").first()
+    return waiting.order_by("queued_at", "pk").first()
+
+
+STARTING = (
+    Instruction.Status.QUEUED,
+    Instruction.Status.RECEIVED,
+)  # an instruction none of whose robots runs yet
 
 
 def claim(execution: Execution, token: str) -> bool:
-    """Mark the execution running under this token, unless someone else did first (conditional update)."""
-    now = timezone.now()
+    """Mark the execution running under this token, unless someone else did first (conditional update); the
+    instruction running with its first robot's claim, pushed then (each claim pushes its robot's task list)."""
+    dispatched = execution.dispatched_at or timezone.now()
     won = Execution.objects.filter(pk=execution.pk, status__in=WAITING).update(
-        status=Execution.Status.RUNNING, worker=token, dispatched_at=execution.dispatched_at or now
+        status=Execution.Status.RUNNING, worker=token, dispatched_at=dispatched
     )
     if won:
-        Instruction.objects.filter(
-            pk=execution.instruction_id, status__in=(Instruction.Status.QUEUED, Instruction.Status.RECEIVED)
-        ).update(status=Instruction.Status.RUNNING)
-        _push_instruction(execution.instruction_id, [execution.robot_id])
+        execution.status, execution.worker, execution.dispatched_at = (
+            Execution.Status.RUNNING,
+            token,
+            dispatched,
+        )
+        started = getattr(execution, "instruction_status", STARTING[0]) in STARTING and (
+            Instruction.objects.filter(pk=execution.instruction_id, status__in=STARTING).update(
+                status=Instruction.Status.RUNNING
+            )
+        )
+        if started:
+            _push_instruction(execution.instruction_id, [execution.robot_id])
+        else:
+            queues.push_robot_queues([execution.robot])
     return bool(won)
 
 
 async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
     """Run one execution from its current step; return the execution that preempted it, if any. Its task
     cancelled (the executor shuts down), the robot is halted and the execution ends saying so."""
-    if not await blocking.call(_begin, execution, lease.token):
-        return None
     outcome, words, preemptor, shut_down = "succeeded", [], None, False
     link = None
     try:
-        link = await blocking.call(_link_of, execution)
+        link = await blocking.call(_begin, execution, lease.token)
+        if link is None:
+            return None  # not claimed: another runner's, or a stop holds the robot back (nothing to record)
         await link.open()
         session = Session(execution, link, lease)
         await lease.fresh()  # its cancel flag read before anything moves (a cancel that came while it queued)
@@ -134,17 +161,14 @@ async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
     return preemptor if recorded else None
 
 
-def _link_of(execution: Execution) -> RobotLink:
-    return RobotLink(execution.robot)
-
-
-def _begin(execution: Execution, token: str) -> bool:
-    """Clear the execution's preempt flag and claim it (unless a stop holds the robot back): whether it runs."""
+def _begin(execution: Execution, token: str) -> RobotLink | None:
+    """Clear the execution's preempt flag and claim it (unless a stop holds the robot back), then build its
+    robot's link (its bindings read): the link, or None when it does not run. One call to the blocking pool.
+    A robot that cannot be linked (no move topic bound) raises LinkError after the claim: the run fails so."""
     coordination.clear_preempt(execution.robot_id, execution.pk)
     if _held_back(execution) or not claim(execution, token):
-        return False
-    execution.refresh_from_db()
-    return True
+        return None
+    return RobotLink(execution.robot)
 
 
 def _end(execution: Execution, token: str, outcome: str, said: str, last: list[str]) -> bool:
@@ -181,6 +205,8 @@ def _unrecorded(execution: Execution, exc: Exception, outcome: str, words: str) 
 def _held_back(execution: Execution) -> bool:
     """A robot a stop holds runs nothing it did not get after the stop from a person: an execution queued or
     preempted before the stop (a race with its cancel) or the system's is cancelled, with the hold's words."""
+    if execution.robot.held_at is None:  # as read with the execution, under the robot's lock
+        return False
     robot = Robot.objects.filter(pk=execution.robot_id).select_related("held_by").first()
     if robot is None or robot.held_at is None:
         return False

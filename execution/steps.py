@@ -122,7 +122,7 @@ class Session:
         fault = self.link.fault
         if fault is None and not self.gate_checked:
             self.gate_checked = True
-            fault = (await blocking.call(pose_store.pose_faults, [self.robot.pk])).get(self.robot.pk)
+            fault = self.link.flagged  # as the link was made, just before the step
             if fault is not None:
                 await self._halt_on_fault(fault)
         if fault is None:

@@ -44,6 +44,36 @@ def test_each_claim_pushes_only_the_claiming_robots_task_list(shares, pushed):
     assert Instruction.objects.get(pk=shares[0].instruction_id).status == "running"
 
 
+def test_only_the_first_claim_of_an_instruction_updates_and_pushes_it_and_none_reads_its_row_back(
+    shares, pushed, monkeypatch, django_assert_num_queries
+):
+    """Each robot's claim of an instruction to N robots used to update the instruction, read it and push it, and
+    read its own execution back: the executor starting 50 robots queued those calls behind each other."""
+    instructions = []
+    monkeypatch.setattr(live, "instruction", lambda instruction: instructions.append(instruction.status))
+    early = runner.next_execution(shares[-1].robot_id)  # read before any claim: its instruction still queued
+    taken = []
+    for number, execution in enumerate(shares[:-1]):
+        taken.append(
+            runner.next_execution(execution.robot_id)
+        )  # as the runner reads it, just before its claim
+        # the first: its row, the instruction's, the instruction read to push, its task list (robots, lists);
+        # the others: their row and their task list (the robot read with the execution)
+        with django_assert_num_queries(5 if number == 0 else 2):
+            assert runner.claim(taken[-1], "token")
+    with django_assert_num_queries(
+        3
+    ):  # read as queued: the instruction's conditional update, which finds none
+        assert runner.claim(early, "token")
+    assert instructions == ["running"]  # pushed once, by the claim that changed it
+    assert pushed == [execution.robot_id for execution in shares]
+    for execution in [*taken, early]:  # what the claim wrote, as the row now says
+        row = Execution.objects.get(pk=execution.pk)
+        assert (execution.status, execution.worker) == (row.status, row.worker) == ("running", "token")
+        assert execution.dispatched_at == row.dispatched_at is not None
+    assert not runner.claim(runner.next_execution(shares[0].robot_id) or taken[0], "other")  # nobody else's
+
+
 def test_a_share_that_ends_pushes_its_robots_list_and_the_last_pushes_every_robots(shares, pushed):
     for execution in shares:
         runner.claim(execution, "token")
