@@ -43,7 +43,7 @@ from execution.coordination import HEARTBEAT_S, LIVELY_S, RELEASE, RENEW, RobotL
 from fleetcore import faults
 from robots import poses as pose_store
 
-TICK_S = 0.05  # between the board's round trips: a flag is seen this late at most (odometry comes at 20 Hz)
+TICK_S = 0.05  # between the board's round trips: a flag is seen this late at most when its nudge is lost
 REDIS_TIMEOUT_S = 0.5  # one round trip; a Redis that does not answer is an error for every lease at once
 LISTEN_RETRY_S = 1.0  # the flags channel's subscription, lost, is made again after this
 
@@ -198,23 +198,22 @@ class Board:
         leases = list(self.leases)
         if not leases:
             return
-        pipe = self._redis().pipeline(transaction=False)
-        for lease in leases:
+        keys = []  # one MGET for every lease's three flags: a pipeline of an MGET each was a tenth of an
+        for (
+            lease
+        ) in leases:  # executor driving 50 robots (py-spy), its Python per command twenty times a second
             robot = lease.lock.robot_id
             cancel = key("cancel", lease.watched) if lease.watched is not None else key("cancel", "none")
-            pipe.mget(key("stop", robot), key("preempt", robot), cancel)
+            keys += [key("stop", robot), key("preempt", robot), cancel]
         try:
-            answers = await asyncio.wait_for(pipe.execute(raise_on_error=False), REDIS_TIMEOUT_S * 2)
+            values = await asyncio.wait_for(self._redis().mget(keys), REDIS_TIMEOUT_S * 2)
         except (RedisError, OSError, TimeoutError) as exc:
             error = _read_failure(exc)
             for lease in leases:
                 lease._failed(error)
             return
-        for lease, values in zip(leases, answers, strict=True):
-            if isinstance(values, Exception):
-                lease._failed(values if isinstance(values, RedisError) else RedisError(str(values)))
-                continue
-            lease._took(values)
+        for index, lease in enumerate(leases):
+            lease._took(values[3 * index : 3 * index + 3])
         self._store_poses(leases)
 
     def _renewals(self, ended: threading.Event) -> None:

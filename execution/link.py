@@ -28,6 +28,11 @@ from robots.models import Robot
 from robots.rosbridge import pool, sync
 
 PHOTO_TICK_S = 0.25  # waiting for a camera frame, the session is checked this often (stops, its heartbeat)
+# A driven robot's odometry is followed at this period (rosbridge's throttle_rate; queue_length 1: the newest),
+# and each message is a control tick. At a TurtleBot's 20 Hz, taking and answering every message was most of
+# what a driven robot cost its executor (7.7 to 8.4 ms/s, docs/scale.md); motion.Approach lands a turn or drive
+# within its tolerance on commands 0.1 s apart, and stops never wait for a tick (the board's flags, fast_stop).
+CONTROL_MS = 100
 
 
 class LinkError(RuntimeError):
@@ -80,7 +85,8 @@ class Latest:
             if left <= 0:
                 return None, seen
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._changed.wait(), left)
+                async with asyncio.timeout(left):  # no task per wait, as wait_for makes (each control tick)
+                    await self._changed.wait()
         return self.value, self.count
 
 
@@ -131,7 +137,9 @@ class RobotLink:
         except Exception as exc:  # unreachable endpoint, timeout: a one-line reason for the outcome
             raise LinkError(f"{self.robot.name}: cannot reach {self.robot.endpoint}: {exc}") from exc
         odometry = self.odometry
-        await self._subscribe(odometry.target, odometry.message_type or "nav_msgs/Odometry", self._on_odom)
+        await self._subscribe(
+            odometry.target, odometry.message_type or "nav_msgs/Odometry", self._on_odom, CONTROL_MS
+        )
         if self.amcl is not None:
             await self._subscribe(self.amcl.target, self.amcl.message_type or "", self._on_amcl)
         if self.nav_kind == NAV_MOVE_BASE:
@@ -139,8 +147,9 @@ class RobotLink:
             await self._subscribe(f"{ns}/status", "actionlib_msgs/GoalStatusArray", self.nav_status.put)
         return self
 
-    async def _subscribe(self, topic: str, type_: str, callback) -> None:
-        self._subs.append(await self.client.subscribe(topic, type_, callback))
+    async def _subscribe(self, topic: str, type_: str, callback, throttle_rate: int = 0) -> None:
+        queue = 1 if throttle_rate else 0  # throttled: the newest message each period, never a backlog
+        self._subs.append(await self.client.subscribe(topic, type_, callback, throttle_rate, queue))
 
     @property
     def connected(self) -> bool:

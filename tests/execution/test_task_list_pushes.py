@@ -91,6 +91,30 @@ def test_a_share_that_ends_pushes_its_robots_list_and_the_last_pushes_every_robo
     assert Instruction.objects.get(pk=first.instruction_id).status == "succeeded"
 
 
+def test_a_share_that_ends_before_the_others_reads_no_other_share_and_pushes_no_instruction(
+    shares, pushed, monkeypatch
+):
+    """Each robot's end read every share of the instruction with its robot, to see whether it was the last: an
+    instruction to 50 robots read 2,500 rows, a fifth of its executor's time."""
+    from django.db import connection
+
+    for execution in shares:
+        runner.claim(execution, "token")
+    instructions, rows = [], []
+    monkeypatch.setattr(live, "instruction", lambda instruction: instructions.append(instruction.status))
+
+    def counting(execute, sql, params, many, context):
+        result = execute(sql, params, many, context)
+        if sql.lstrip().upper().startswith("SELECT"):
+            rows.append(context["cursor"].rowcount)
+        return result
+
+    with connection.execute_wrapper(counting):
+        assert runner.finish(shares[0], "token", "succeeded", "turned")
+    assert rows and max(rows) <= 1  # its robot, its task list, whether any share is open: never every share
+    assert instructions == [] and pushed[-1] == shares[0].robot_id  # its list, not the unchanged instruction
+
+
 def test_the_task_lists_of_many_robots_are_read_at_once_and_each_as_alone(
     shares, django_assert_max_num_queries
 ):
