@@ -125,12 +125,15 @@ def claim(execution: Execution, token: str) -> bool:
 async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
     """Run one execution from its current step; return the execution that preempted it, if any. Its task
     cancelled (the executor shuts down), the robot is halted and the execution ends saying so."""
+    begun = await blocking.call(_begin, execution, lease.token)  # raised before its claim: it stays queued
+    if begun is None:
+        return None  # not claimed: another runner's, or a stop holds the robot back (nothing to record)
     outcome, words, preemptor, shut_down = "succeeded", [], None, False
     link = None
     try:
-        link = await blocking.call(_begin, execution, lease.token)
-        if link is None:
-            return None  # not claimed: another runner's, or a stop holds the robot back (nothing to record)
+        if isinstance(begun, Exception):
+            raise begun  # claimed, but its link could not be made: the run fails with the reason
+        link = begun
         await link.open()
         session = Session(execution, link, lease)
         await lease.fresh()  # its cancel flag read before anything moves (a cancel that came while it queued)
@@ -163,14 +166,18 @@ async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
     return preemptor if recorded else None
 
 
-def _begin(execution: Execution, token: str) -> RobotLink | None:
+def _begin(execution: Execution, token: str) -> RobotLink | Exception | None:
     """Clear the execution's preempt flag and claim it (unless a stop holds the robot back), then build its
-    robot's link (its bindings read): the link, or None when it does not run. One call to the blocking pool.
-    A robot that cannot be linked (no move topic bound) raises LinkError after the claim: the run fails so."""
+    robot's link (its bindings read), in one call to the blocking pool: None when it does not run; else the
+    link, or why it could not be made (no move topic bound, a database gone after the claim), for the run to
+    fail with. A failure before the claim is raised: the execution stays queued, for the sweep."""
     coordination.clear_preempt(execution.robot_id, execution.pk)
     if _held_back(execution) or not claim(execution, token):
         return None
-    return RobotLink(execution.robot)
+    try:
+        return RobotLink(execution.robot)
+    except Exception as exc:  # claimed: recorded as the run's failure, never left running
+        return exc
 
 
 def _end(execution: Execution, token: str, outcome: str, said: str, last: list[str]) -> bool:

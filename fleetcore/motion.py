@@ -132,7 +132,9 @@ class Straight:
     tolerance: float = 0.02
     start: tuple[float, float, float] | None = None
     _along: float = 0.0  # how far along it was at the last command
-    _approach: Approach | None = None
+
+    def __post_init__(self) -> None:
+        self._approach = Approach(self.tolerance)
 
     def command(self, pose: tuple[float, float, float]) -> Command:
         if self.start is None:
@@ -141,7 +143,6 @@ class Straight:
         sign = 1.0 if self.distance >= 0 else -1.0
         along = ((pose[0] - x0) * math.cos(yaw0) + (pose[1] - y0) * math.sin(yaw0)) * sign
         step, self._along = along - self._along, along
-        self._approach = self._approach or Approach(self.tolerance)
         how = self._approach.next(abs(self.distance) - along, step)
         if isinstance(how, Command):
             return how
@@ -166,11 +167,12 @@ class TurnBy:
     tolerance: float = 0.03
     turned: float = 0.0
     _last: float | None = None
-    _approach: Approach | None = None
+
+    def __post_init__(self) -> None:
+        self._approach = Approach(self.tolerance)
 
     def command(self, pose: tuple[float, float, float]) -> Command:
         before = self.turned
-        self._approach = self._approach or Approach(self.tolerance)
         how = self._approach.next(self.angle - self.done(pose), self.turned - before)
         if isinstance(how, Command):
             return how

@@ -129,3 +129,50 @@ def test_the_task_lists_of_many_robots_are_read_at_once_and_each_as_alone(
     assert together == [queues.robot_queue(robot) for robot in robots]
     assert together[0]["running"]["instruction"] == shares[0].instruction_id
     assert [len(q["queued"]) for q in together] == [0] + [1] * (ROBOTS - 1)
+
+
+@pytest.fixture
+def share_alone(transactional_db, exec_settings):
+    """One robot with no bindings (it cannot be linked) and its queued share of an instruction, committed (the
+    blocking pool's threads read it on connections of their own)."""
+    robot = Robot.objects.create(name="r0", endpoint="ws://127.0.0.1:1", namespace="/r0", state="ready")
+    instruction = Instruction.objects.create(text="turn r0 left", status=Instruction.Status.QUEUED)
+    return Execution.objects.create(instruction=instruction, robot=robot, steps=[{"action": "turn_by"}])
+
+
+def _run(execution: Execution):
+    """run_execution on a loop of its own, its blocking pool closed after (a lease no step reaches)."""
+    import asyncio
+    from types import SimpleNamespace
+
+    from execution import blocking
+
+    taken = runner.next_execution(execution.robot_id)  # as the drain reads it
+
+    async def body():
+        try:
+            return await runner.run_execution(taken, SimpleNamespace(token="t"))
+        finally:
+            await blocking.close()
+
+    return asyncio.run(body())
+
+
+def test_a_robot_whose_link_cannot_be_made_fails_its_claimed_run_saying_why(share_alone):
+    """The claim and the link are one call to the pool: the link's failure comes after the claim, and the run
+    ends failed with it (never left running for the watchdog)."""
+    assert _run(share_alone) is None
+    row = Execution.objects.get(pk=share_alone.pk)
+    assert row.status == "failed" and "r0: no move topic is bound" in row.error
+
+
+def test_a_database_gone_before_the_claim_leaves_the_share_queued_for_the_sweep(share_alone, monkeypatch):
+    from django.db import OperationalError
+
+    def gone(*_args):
+        raise OperationalError("the database system is shutting down")
+
+    monkeypatch.setattr(runner, "claim", gone)
+    with pytest.raises(OperationalError):
+        _run(share_alone)
+    assert Execution.objects.get(pk=share_alone.pk).status == "queued"  # not failed, not "unrecorded"
