@@ -76,17 +76,17 @@ def next_execution(robot_id: int, preferred: int | None = None) -> Execution | N
     """The preemptor if one is named, else the first in the robot's queue (oldest, unless a person moved it);
     with its robot, and its instruction's status as `instruction_status` (what the claim needs)."""
     _, flagged = coordination.flags(robot_id)
-    waiting = (
+    queued = (
         Execution.objects.filter(robot_id=robot_id, status__in=WAITING)
         .select_related("robot")
         .annotate(instruction_status=F("instruction__status"))
     )
     for pk in (preferred, flagged):
         if pk is not None:
-            found = waiting.filter(pk=pk).first()
+            found = queued.filter(pk=pk).first()
             if found is not None:
                 return found
-    return waiting.order_by("queued_at", "pk").first()
+    return queued.order_by("queued_at", "pk").first()
 
 
 def waiting(robot_id: int) -> bool:
