@@ -28,11 +28,11 @@ from robots.models import Robot
 from robots.rosbridge import pool, sync
 
 PHOTO_TICK_S = 0.25  # waiting for a camera frame, the session is checked this often (stops, its heartbeat)
-# A driven robot's odometry is followed at this period (rosbridge's throttle_rate; queue_length 1: the newest),
-# and each message is a control tick. At a TurtleBot's 20 Hz, taking and answering every message was most of
-# what a driven robot cost its executor (7.7 to 8.4 ms/s, docs/scale.md); motion.Approach lands a turn or drive
-# within its tolerance on commands 0.1 s apart, and stops never wait for a tick (the board's flags, fast_stop).
-CONTROL_MS = 100
+# A driven robot's odometry is followed at most at this period (rosbridge's throttle_rate; queue_length 1: the
+# newest), and each message is a control tick: a TurtleBot's own 20 Hz. At 10 Hz a driven robot cost its executor
+# less (docs/scale.md), but a stop whose fast zeros could not go out waited for the next tick, past one odometry
+# period (tests/execution/test_queueing.py): the stop comes first.
+CONTROL_MS = 50
 
 
 class LinkError(RuntimeError):
