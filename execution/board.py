@@ -198,10 +198,10 @@ class Board:
         leases = list(self.leases)
         if not leases:
             return
-        keys = []  # one MGET for every lease's three flags: a pipeline of an MGET each was a tenth of an
-        for (
-            lease
-        ) in leases:  # executor driving 50 robots (py-spy), its Python per command twenty times a second
+        # one MGET for every lease's three flags: a pipeline of an MGET each was a tenth of an executor driving 50
+        # robots (py-spy), its Python per command twenty times a second
+        keys = []
+        for lease in leases:
             robot = lease.lock.robot_id
             cancel = key("cancel", lease.watched) if lease.watched is not None else key("cancel", "none")
             keys += [key("stop", robot), key("preempt", robot), cancel]
