@@ -21,8 +21,10 @@ What a lease says, as the threaded heartbeat said before it (execution.coordinat
   as of the last read. Whoever raises a flag also publishes on coordination's `flags` channel, which the board
   listens to: it reads at once, so a stop is seen one round trip after its flag, not up to TICK_S later (a
   robot under way could otherwise take a command after the stop's zero). TICK_S bounds it when a message is
-  lost. A stop's own zeros leave before its flags (execution.fast_stop), and a session that sees the flag ends
-  with a zero of its own, so the robot ends at rest either way.
+  lost. A read whose flags differ from the last wakes the lease's session (`wake`, the robot's link: it waits for
+  its next odometry), which checks them at once instead of at its next pose: a stop is acted on one round trip
+  after its flag, whatever the odometry's rate. A stop's own zeros leave before its flags (execution.fast_stop),
+  and a session that sees the flag ends with a zero of its own, so the robot ends at rest either way.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import contextlib
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import redis
 import redis.asyncio
@@ -74,6 +77,7 @@ class Lease:
         self.watched: int | None = None  # the execution whose cancel flag is read
         self.flags: tuple[float, int | None, str | None] = (0.0, None, None)
         self.pose: tuple | None = None  # to keep for the fleet with the next tick
+        self.wake: Callable[[], None] | None = None  # the session's, called when the flags change
         self._read = asyncio.Event()
         self.beat()
 
@@ -129,10 +133,12 @@ class Lease:
     def _took(self, values) -> None:
         """The flags of one round trip."""
         stop, preempt, cancel = values
-        self.flags = (float(stop) if stop else 0.0, int(preempt) if preempt else None,
-                      cancel.decode() if cancel else None)  # fmt: skip
-        self.error = None
+        flags = (float(stop) if stop else 0.0, int(preempt) if preempt else None,
+                 cancel.decode() if cancel else None)  # fmt: skip
+        changed, self.flags, self.error = flags != self.flags, flags, None
         self._read.set()
+        if changed and self.wake is not None:
+            self.wake()
 
     def _failed(self, exc: RedisError) -> None:
         self.error = exc

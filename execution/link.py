@@ -29,10 +29,12 @@ from robots.rosbridge import pool, sync
 
 PHOTO_TICK_S = 0.25  # waiting for a camera frame, the session is checked this often (stops, its heartbeat)
 # A driven robot's odometry is followed at most at this period (rosbridge's throttle_rate; queue_length 1: the
-# newest), and each message is a control tick: a TurtleBot's own 20 Hz. At 10 Hz a driven robot cost its executor
-# less (docs/scale.md), but a stop whose fast zeros could not go out waited for the next tick, past one odometry
-# period (tests/execution/test_queueing.py): the stop comes first.
-CONTROL_MS = 50
+# newest), and each message is a control tick: 10 Hz, half a TurtleBot's own 20 Hz, for half the frames its
+# executor and its robot's rosbridge handle (docs/scale.md). A stop does not wait for a tick: its flag wakes the
+# session between poses (execution.board, Lease.wake), so it is acted on one Redis round trip after its flag
+# (tests/execution/test_board.py, test_queueing.py); a turn or a drive comes to rest as near its goal as at 20 Hz
+# (tests/execution/test_motion.py: commands 0.1 s apart).
+CONTROL_MS = 100
 
 
 class LinkError(RuntimeError):
@@ -74,11 +76,16 @@ class Latest:
 
     def put(self, value) -> None:
         self.value, self.count = value, self.count + 1
+        self.nudge()
+
+    def nudge(self) -> None:
+        """Wake whoever waits in `next`, with no new value: its `between` is called."""
         self._changed.set()
         self._changed = asyncio.Event()
 
-    async def next(self, seen: int, timeout: float):
-        """(value, count) once count > seen, or (None, seen) on timeout."""
+    async def next(self, seen: int, timeout: float, between=None):
+        """(value, count) once count > seen, or (None, seen) on timeout; `between()` is called on each nudge
+        meanwhile (it may raise, ending the wait)."""
         deadline = time.monotonic() + timeout
         while self.count <= seen:
             left = deadline - time.monotonic()
@@ -87,6 +94,8 @@ class Latest:
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(left):  # no task per wait, as wait_for makes (each control tick)
                     await self._changed.wait()
+            if between is not None and self.count <= seen:
+                between()
         return self.value, self.count
 
 
@@ -190,9 +199,10 @@ class RobotLink:
         c, s = math.cos(yaw0), math.sin(yaw0)
         self.start = (ax - (c * lx - s * ly), ay - (s * lx + c * ly), yaw0)
 
-    async def next_pose(self, seen: int, timeout: float = 1.0):
-        """((x, y, yaw) on the map, counter) after the next odometry message; (None, seen) on timeout."""
-        return await self.poses.next(seen, timeout)
+    async def next_pose(self, seen: int, timeout: float = 1.0, between=None):
+        """((x, y, yaw) on the map, counter) after the next odometry message; (None, seen) on timeout;
+        `between()` is called whenever the wait is nudged (`poses.nudge`) before then."""
+        return await self.poses.next(seen, timeout, between)
 
     # ----- camera -----
     async def photo(self, timeout: float, between=None) -> dict:

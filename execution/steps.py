@@ -93,15 +93,17 @@ class Session:
 
     def __post_init__(self) -> None:
         self.lease.watch(self.execution.pk)
+        self.lease.wake = self.link.poses.nudge  # flags that change are checked at once, not at the next pose
 
     async def pose(self) -> tuple[float, float, float]:
         """The next odometry pose; a gap stops the robot while waiting, a dropped link or 3 s fail the step,
-        and so does odometry the gate refuses (here or in the links process), at once."""
+        and so does odometry the gate refuses (here or in the links process), at once. A flag raised meanwhile
+        (a stop, a preemption, a lost lock: `check`) ends the wait when the board reads it, not at the pose."""
         await self._check_gate()
         waited = 0.0
         while True:
             self.lease.beat()
-            pose, self.seen = await self.link.next_pose(self.seen, ODOMETRY_GAP)
+            pose, self.seen = await self.link.next_pose(self.seen, ODOMETRY_GAP, self.check)
             await self._check_gate()
             if pose is not None:
                 await self._note_motion(pose)

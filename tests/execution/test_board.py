@@ -10,6 +10,7 @@ import redis
 
 from execution import coordination
 from execution.board import Board
+from execution.link import Latest
 
 
 @pytest.fixture
@@ -135,7 +136,7 @@ def test_redis_lost_under_a_command_loop_fails_the_step_as_executor_lost(lock, m
         await lease.fresh()
         monkeypatch.setattr(board, "_redis", lambda: _Broken())
         await lease.fresh()
-        link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=SimpleNamespace(value=None))
+        link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=Latest())
         session = Session(SimpleNamespace(pk=1), link, lease)
         with pytest.raises(Interrupted) as failure:
             session.check()
@@ -181,7 +182,7 @@ def test_a_read_that_gets_no_answer_in_time_fails_the_step_saying_so_not_redis_u
         await lease.fresh()
         monkeypatch.setattr(board, "_redis", lambda: _Hung())
         await lease.fresh(timeout=3.0)  # the read's bound (1 s) passes first
-        link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=SimpleNamespace(value=None))
+        link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=Latest())
         with pytest.raises(Interrupted) as failure:
             Session(SimpleNamespace(pk=1), link, lease).check()
         return failure.value
@@ -206,3 +207,41 @@ def test_a_stop_flag_is_read_at_once_not_at_the_next_tick(lock):
 
     seen, after = on_board(body, tick=10.0, every=10.0)
     assert seen and after < 5.0  # bounded; far under the 10 s tick
+
+
+def test_a_stop_flag_ends_a_sessions_wait_for_odometry_at_once_not_at_its_next_pose(lock):
+    """A session waits for its robot's next odometry between commands (a tick of its control loop). A stop
+    raised meanwhile wakes it: it ends "stopped" then (its runner halts the robot), not when the next pose
+    comes; here none comes, and without the wake the wait would end "no odometry" after ODOMETRY_TIMEOUT."""
+    from types import SimpleNamespace
+
+    from execution.steps import Interrupted, Session
+
+    async def halt():
+        return None
+
+    async def body(board):
+        lease = board.lease(lock)
+        await lease.fresh()
+        poses = Latest()
+        link = SimpleNamespace(
+            robot=SimpleNamespace(pk=1, name="tb", endpoint="ws://127.0.0.1:1"),
+            poses=poses,
+            fault=None,
+            flagged=None,
+            connected=True,
+            odometry=SimpleNamespace(target="/odom"),
+            halt=halt,
+            next_pose=lambda seen, timeout, between=None: poses.next(seen, timeout, between),
+        )
+        session = Session(SimpleNamespace(pk=1), link, lease)
+        waiting = asyncio.ensure_future(session.pose())
+        await asyncio.sleep(0.3)  # waiting for a pose; the board's flags channel subscribed
+        assert not waiting.done()
+        coordination.request_stop([1])
+        with pytest.raises(Interrupted) as stopped:
+            await waiting
+        return stopped.value
+
+    stopped = on_board(body, tick=10.0, every=0.05)  # no tick reads the flag: the channel's nudge does
+    assert (stopped.outcome, stopped.reason) == ("cancelled", "stopped")

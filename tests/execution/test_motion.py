@@ -59,10 +59,11 @@ def braking(controller, accel: tuple[float, float], gaps: list[float], age: floa
 LATE = [0.05, 0.05, 0.05, 0.19]  # every fourth tick 140 ms late, as on the cluster at 100 robots
 
 
-# (ticks apart, how near it must come to rest): on time or every fourth late, within the tolerance and what
-# it coasts; a command every 0.1 then 0.3 s, within what a late correction at its slowest may overshoot
-TURN_TICKS = [([0.05], 3.0), (LATE, 3.0), ([0.1, 0.3], 8.0)]
-MOVE_TICKS = [([0.05], 0.04), (LATE, 0.04), ([0.1, 0.3], 0.08)]
+# (ticks apart, how near it must come to rest): on time (20 Hz; 10 Hz, the executor's rate: link.CONTROL_MS) or every
+# fourth late, within the tolerance and what it coasts; a command every 0.1 then 0.3 s, within what a late
+# correction at its slowest may overshoot
+TURN_TICKS = [([0.05], 3.0), ([0.1], 3.0), (LATE, 3.0), ([0.1, 0.3], 8.0)]
+MOVE_TICKS = [([0.05], 0.04), ([0.1], 0.04), (LATE, 0.04), ([0.1, 0.3], 0.08)]
 
 
 @settings(max_examples=60, deadline=None)
