@@ -85,9 +85,11 @@ class Lease:
     def token(self) -> str:
         return self.lock.token
 
-    def beat(self) -> None:
-        """The command loop is alive: keep renewing for another LIVELY_S."""
-        self.alive_until = time.monotonic() + self.lively
+    def beat(self, lively: float | None = None) -> None:
+        """The command loop is alive: keep renewing for another LIVELY_S (or `lively` s: a wait of its own while
+        its robot rests, such as the database recording its end: execution.runner.while_resting)."""
+        self.window = self.lively if lively is None else lively
+        self.alive_until = time.monotonic() + self.window
 
     @property
     def held(self) -> bool:
@@ -102,8 +104,12 @@ class Lease:
         if self.lost:
             return "its lock on the robot lapsed before it was renewed (it is not ours any more)"
         if self.quiet:
-            return f"its command loop did not run for {self.lively:g} s, so its lock on the robot lapsed"
+            return self.why_quiet
         return f"its lock on the robot was not renewed for {self.lock.ttl_ms / 1000:g} s (a starved process?)"
+
+    @property
+    def why_quiet(self) -> str:
+        return f"its command loop did not run for {self.window:g} s, so its lock on the robot lapsed"
 
     def watch(self, execution_id: int) -> None:
         """Read this execution's cancel flag from now on (the execution the robot runs)."""
@@ -241,7 +247,10 @@ class Board:
         now = time.monotonic()
         due = []
         for lease in list(self.leases):  # one C call: safe while the loop adds and drops leases
-            lease.quiet = now > lease.alive_until
+            quiet = now > lease.alive_until
+            if quiet and not lease.quiet:
+                log.warning("robot %s: %s", lease.lock.robot_id, lease.why_quiet)
+            lease.quiet = quiet
             if not lease.quiet and not lease.lost:
                 due.append(lease)
         if not due:

@@ -62,7 +62,9 @@ async def drain_robot(robot_id: int) -> bool:
             return ran
         found, preferred = False, None
         try:
-            while lease.held and (execution := await blocking.call(next_execution, robot_id, preferred)):
+            while lease.held and (
+                execution := await while_resting(lease, next_execution, robot_id, preferred)
+            ):
                 found = ran = True
                 lease.beat()
                 preferred = await run_execution(execution, lease)
@@ -92,6 +94,23 @@ def next_execution(robot_id: int, preferred: int | None = None) -> Execution | N
 def waiting(robot_id: int) -> bool:
     """Whether the robot has work waiting (a drain's look after its run, before it takes the lock anew)."""
     return Execution.objects.filter(robot_id=robot_id, status__in=WAITING).exists()
+
+
+# A call through the blocking pool while the robot rests (its start, between steps, its end) keeps the robot's lock
+# this long, not LIVELY_S: a stop-all ends every robot of an executor at once, and with 250 robots' ends queued in
+# its pool some waited past LIVELY_S, their locks lapsed, and the watchdog called a robot a person had stopped
+# "executor lost" (bench.cluster at 500 robots). Nothing is commanded meanwhile; a call that never returns still
+# lets the lock lapse for the watchdog, this much later.
+RESTING_WAIT_S = 60.0
+
+
+async def while_resting(lease: board.Lease, fn, /, *args):
+    """fn(*args) through the blocking pool, the lease kept alive for RESTING_WAIT_S meanwhile (see above)."""
+    lease.beat(RESTING_WAIT_S)
+    try:
+        return await blocking.call(fn, *args)
+    finally:
+        lease.beat()
 
 
 STARTING = (Instruction.Status.QUEUED, Instruction.Status.RECEIVED)  # none of its robots runs yet
@@ -125,11 +144,12 @@ def claim(execution: Execution, token: str) -> bool:
 async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
     """Run one execution from its current step; return the execution that preempted it, if any. Its task
     cancelled (the executor shuts down), the robot is halted and the execution ends saying so."""
-    begun = await blocking.call(_begin, execution, lease.token)  # raised before its claim: it stays queued
+    # a failure before its claim is raised: it stays queued
+    begun = await while_resting(lease, _begin, execution, lease.token)
     if begun is None:
         return None  # not claimed: another runner's, or a stop holds the robot back (nothing to record)
     outcome, words, preemptor, shut_down = "succeeded", [], None, False
-    link = None
+    link = session = None
     try:
         if isinstance(begun, Exception):
             raise begun  # claimed, but its link could not be made: the run fails with the reason
@@ -139,7 +159,7 @@ async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
         await lease.fresh()  # its cancel flag read before anything moves (a cancel that came while it queued)
         for index in range(execution.step_index, len(execution.steps)):
             words.append(await run_step(session, execution.steps[index]))
-            await blocking.call(advance, execution, index + 1)
+            await while_resting(lease, advance, execution, index + 1)  # a step ends with its robot halted
     except asyncio.CancelledError:
         outcome, shut_down = "failed", True
         words.append(SHUT_DOWN)
@@ -158,9 +178,13 @@ async def run_execution(execution: Execution, lease: board.Lease) -> int | None:
         outcome = "failed"
         words.append(f"{type(exc).__name__}: {exc}")
     finally:
+        lease.beat(RESTING_WAIT_S)  # halted from here on: what is left is bookkeeping, under the lock
         await asyncio.shield(_halt(link))
+        if session is not None:
+            await asyncio.shield(session.stamped())
     said = "; ".join(words)
-    recorded = await asyncio.shield(blocking.call(_end, execution, lease.token, outcome, said, words[-1:]))
+    ending = while_resting(lease, _end, execution, lease.token, outcome, said, words[-1:])
+    recorded = await asyncio.shield(ending)
     if shut_down:
         raise asyncio.CancelledError
     return preemptor if recorded else None

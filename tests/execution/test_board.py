@@ -245,3 +245,51 @@ def test_a_stop_flag_ends_a_sessions_wait_for_odometry_at_once_not_at_its_next_p
 
     stopped = on_board(body, tick=10.0, every=0.05)  # no tick reads the flag: the channel's nudge does
     assert (stopped.outcome, stopped.reason) == ("cancelled", "stopped")
+
+
+def test_a_wait_in_the_blocking_pool_while_the_robot_rests_keeps_its_lock(lock):
+    """A stop-all ends every robot of an executor at once; their ends queue in its blocking pool. One that waited
+    past its lively time let its lock lapse, and the watchdog called a robot a person had stopped "executor lost"
+    (bench.cluster, 500 robots: 159 of them). A wait while the robot rests keeps the lease beating."""
+    from execution.runner import while_resting
+
+    async def body(board):
+        lease = board.lease(lock, lively=0.1)
+        waited = await while_resting(
+            lease, time.sleep, 0.8
+        )  # twice the lock's time to live, 8x its lively time
+        return lease, waited
+
+    lease, _ = on_board(body)
+    assert lease.held and not lease.quiet
+    assert coordination.lock_holders([1])[1] == lock.token
+
+
+def test_a_timing_stamp_does_not_hold_the_control_loop_while_the_database_is_slow(lock, monkeypatch):
+    """The first command's stamp goes to the database through the pool; with the pool busy, the loop that commands
+    the robot goes on (its next pose, its next command) and the stamp lands later, before the run's end."""
+    import threading
+    from types import SimpleNamespace
+
+    from execution import steps
+
+    released, stamped = threading.Event(), []
+
+    def slow_stamp(execution, field_name, now):
+        assert released.wait(5.0)
+        stamped.append((field_name, now))
+
+    monkeypatch.setattr(steps, "_stamp", slow_stamp)
+
+    async def body(board):
+        lease = board.lease(lock)
+        link = SimpleNamespace(robot=SimpleNamespace(pk=1, name="tb"), poses=Latest())
+        session = steps.Session(SimpleNamespace(pk=1), link, lease)
+        await session.mark_commanded()  # returns with the stamp still held in the pool
+        held = [task.done() for task in session.stamps]
+        released.set()
+        await session.stamped()
+        return held
+
+    assert on_board(body) == [False]
+    assert [name for name, _ in stamped] == ["first_command_at"]

@@ -151,7 +151,9 @@ def _run(execution: Execution):
 
     async def body():
         try:
-            return await runner.run_execution(taken, SimpleNamespace(token="t"))
+            return await runner.run_execution(
+                taken, SimpleNamespace(token="t", beat=lambda lively=None: None)
+            )
         finally:
             await blocking.close()
 
