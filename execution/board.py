@@ -1,11 +1,11 @@
 """What an executor process's robots read from and keep in Redis, in one round trip per tick for all of them.
 
-Each robot the process runs holds its lock through a Lease. Every TICK_S the board sends one pipeline: each
+Each robot the process runs holds its lock through a Lease. Every TICK_S the board sends one MGET: each
 lease's stop, preempt and cancel flags (a robot's session reads them from its lease, with no I/O, before every
 command). The robots' poses, kept now and then for the fleet (robots.poses), leave in one batch per tick too. So
 a driven robot costs its process no Redis call of its own per control tick, and no thread.
 
-The renewals go from one thread of the board's own, every HEARTBEAT_S in one pipeline: each lease whose command
+The renewals go from one thread of the board's own, every HEARTBEAT_S in one script run: each lease whose command
 loop beat within LIVELY_S. On the loop they waited behind everything else the loop does: an executor starting 50
 robots at once (an instruction to all of them, bench.cluster) had its round trips take 100 to 470 ms, and with
 renewals due every HEARTBEAT_S the locks' one-second time to live ran out, so the watchdog called the executor
@@ -42,7 +42,7 @@ from django.conf import settings
 from redis.exceptions import RedisError, ResponseError
 
 from execution import blocking
-from execution.coordination import HEARTBEAT_S, LIVELY_S, RELEASE, RENEW, RobotLock, key
+from execution.coordination import HEARTBEAT_S, LIVELY_S, RELEASE, RENEW_MANY, RobotLock, key
 from fleetcore import faults
 from robots import poses as pose_store
 
@@ -229,7 +229,7 @@ class Board:
         self._store_poses(leases)
 
     def _renewals(self, ended: threading.Event) -> None:
-        """The renewals thread: every `every`, renew each lease whose command loop beat, in one pipeline, until
+        """The renewals thread: every `every`, renew each lease whose command loop beat, in one script run, until
         the board ends (a Redis that fails a round trip is tried again next time; the flags' reads say it)."""
         client = redis.Redis.from_url(
             settings.REDIS_URL, socket_timeout=REDIS_TIMEOUT_S, socket_connect_timeout=REDIS_TIMEOUT_S
@@ -242,8 +242,10 @@ class Board:
             client.close()
 
     def renew(self, client: redis.Redis) -> None:
-        """One pipeline renewing every lease that is neither quiet (its command loop has not beaten within its
-        lively time: hung) nor lost."""
+        """One script renewing every lease that is neither quiet (its command loop has not beaten within its
+        lively time: hung) nor lost (a pipeline of a script run per lease was 250 runs four times a second for an
+        executor driving 250 robots, its thread holding the interpreter's lock for each). A Redis refusing the
+        write refuses it for every lease."""
         now = time.monotonic()
         due = []
         for lease in list(self.leases):  # one C call: safe while the loop adds and drops leases
@@ -255,10 +257,12 @@ class Board:
                 due.append(lease)
         if not due:
             return
-        pipe = client.pipeline(transaction=False)
-        for lease in due:
-            pipe.eval(RENEW, 1, lease.lock.key, lease.token, lease.lock.ttl_ms)
-        for lease, renewed in zip(due, pipe.execute(raise_on_error=False), strict=True):
+        tokens = [value for lease in due for value in (lease.token, lease.lock.ttl_ms)]
+        try:
+            answers = client.eval(RENEW_MANY, len(due), *(lease.lock.key for lease in due), *tokens)
+        except ResponseError as exc:  # refused (a full disk, read-only): no lease renewed, each told why
+            answers = [exc] * len(due)
+        for lease, renewed in zip(due, answers, strict=True):
             lease._renewed(renewed, now)
 
     async def _listen(self) -> None:

@@ -47,6 +47,15 @@ RENEW = (
     "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('pexpire', KEYS[1], ARGV[2]) "
     "else return 0 end"
 )
+# Many locks at once (an executor's board): KEYS the locks, ARGV each one's token and time to live in turn; for
+# each, 1 renewed or 0 not ours any more. One script run instead of one per lock.
+RENEW_MANY = """
+local out = {}
+for i, k in ipairs(KEYS) do
+  if redis.call('get', k) == ARGV[2 * i - 1] then out[i] = redis.call('pexpire', k, ARGV[2 * i]) else out[i] = 0 end
+end
+return out
+"""
 
 
 @functools.cache

@@ -293,3 +293,28 @@ def test_a_timing_stamp_does_not_hold_the_control_loop_while_the_database_is_slo
 
     assert on_board(body) == [False]
     assert [name for name, _ in stamped] == ["first_command_at"]
+
+
+def test_every_lease_is_renewed_by_one_script_run_and_told_its_own_answer(lock):
+    """The renewals of all an executor's leases go in one script run; each lease reads its own answer: a lock
+    another process took is lost for that robot alone."""
+    others = [coordination.RobotLock(robot_id, ttl_ms=400) for robot_id in (2, 3)]
+    assert all(other.acquire() for other in others)
+
+    async def body(board):
+        leases = [board.lease(each, lively=2.0) for each in (lock, *others)]
+        coordination.connection().set(others[0].key, "someone-else")
+        for _ in range(16):  # 0.8 s: twice the locks' time to live
+            for lease in leases:
+                lease.beat()
+            await asyncio.sleep(0.05)
+        return leases
+
+    try:
+        mine, taken, kept = on_board(body)
+        assert mine.held and kept.held
+        assert taken.lost and not taken.held
+        assert coordination.lock_holders([1, 2, 3]) == {1: lock.token, 2: "someone-else", 3: others[1].token}
+    finally:
+        others[1].release()
+        coordination.connection().delete(others[0].key)
