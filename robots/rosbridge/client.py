@@ -41,6 +41,7 @@ LOGGED_DROPS = 10  # bad frames logged one by one per client; after that one lin
 CLOSE_NOT_ROSBRIDGE = 1003  # WebSocket close code "unsupported data"
 # Frames read ahead of the reader (websockets' default): memory is bounded by MAX_QUEUE x the frame limit.
 MAX_QUEUE = 16
+KEEPALIVE_TIMEOUT = "keepalive ping timeout"  # the reason websockets closes a link with when no pong came
 
 
 @dataclass(eq=False)
@@ -284,7 +285,7 @@ class RosbridgeClient:
                 except Exception:
                     log.exception("%s: a frame broke its handler; dropped", self.url)
         except ConnectionClosed as exc:
-            reason, error_type = _closed_reason(exc, self.max_frame_bytes)
+            reason, error_type = _closed_reason(exc, self.max_frame_bytes, self.ping_timeout)
         except Exception as exc:
             log.exception("%s: the reader failed", self.url)
             reason = f"reader failed ({exc!r})"
@@ -495,7 +496,9 @@ class RosbridgeClient:
         await self._send(codec.cancel_action_goal(goal.id, goal.action))
 
 
-def _closed_reason(exc: ConnectionClosed, max_frame_bytes: int) -> tuple[str, type[LinkDown]]:
+def _closed_reason(
+    exc: ConnectionClosed, max_frame_bytes: int, keepalive_s: float | None = None
+) -> tuple[str, type[LinkDown]]:
     """Why a connection closed, in words; a frame over our limit (we closed with 1009) is FrameTooLarge."""
     if exc.sent is not None and exc.sent.code == 1009:
         return (
@@ -503,6 +506,10 @@ def _closed_reason(exc: ConnectionClosed, max_frame_bytes: int) -> tuple[str, ty
             f"({limits.FRAME_SETTING}); link closed",
             FrameTooLarge,
         )
+    if exc.sent is not None and exc.sent.reason == KEEPALIVE_TIMEOUT:
+        # no pong within the timeout: the endpoint does not read what we send (frozen, cut off, or so far behind
+        # that a command or a stop would not reach it in time either), whatever it still sends us
+        return f"no answer to a keepalive ping within {keepalive_s:g} s", LinkDown
     return f"connection lost ({exc.rcvd.code if exc.rcvd else 'no close frame'})", LinkDown
 
 

@@ -185,3 +185,77 @@ async def test_a_link_is_idle_only_while_connected_with_nothing_left_to_write(en
             await asyncio.sleep(0.01)
         assert client.idle
     assert not client.idle  # closed
+
+
+async def _serve(handler):
+    """A bare WebSocket server on a free port of 127.0.0.1 (its handler decides what the endpoint does)."""
+    from websockets.asyncio.server import serve
+
+    port = free_port()
+    return await serve(handler, "127.0.0.1", port, ping_interval=None), f"ws://127.0.0.1:{port}"
+
+
+async def test_a_link_that_streams_faster_than_it_is_read_is_not_closed_as_dead():
+    """A process behind on its frames is slow, not cut off: the pong of its keepalive is read with the next chunk
+    of the stream (websockets parses a chunk at once, however many messages wait for the reader), so the link
+    stays up while the frames queue. (A guard: checked against the 1,000-robot cluster's "link lost", which
+    this did not reproduce.)"""
+    import time
+
+    frame = '{"op":"publish","topic":"/odom","msg":{"seq":1}}'
+
+    async def stream(ws):
+        for sent in range(
+            10_000
+        ):  # ~1,000 a second (under the flood limit), three times what the reader takes
+            await ws.send(frame)
+            if sent % 10 == 9:
+                await asyncio.sleep(0.01)
+
+    server, url = await _serve(stream)
+    events, read = [], []
+    client = RosbridgeClient(url, ping_interval=0.3, ping_timeout=0.3, max_backoff=0.2)
+    client.on_link(lambda up, reason: events.append((up, reason)))
+
+    def slow(message):  # 3 ms a frame: the pong of each ping waits behind seconds of frames
+        time.sleep(0.003)
+        read.append(message)
+
+    try:
+        await client.start()
+        assert await client.wait_connected(3)
+        await client.subscribe("/odom", "nav_msgs/Odometry", slow)
+        await asyncio.sleep(2.5)  # eight keepalive periods
+    finally:
+        await client.close()
+        server.close()
+    assert events == [(True, "connected")]
+    assert len(read) > 100
+
+
+async def test_an_endpoint_that_stops_answering_is_closed_saying_so():
+    """An endpoint that reads nothing more (its process stopped, its network cut, or its reader wedged: a command
+    would not reach it) answers no ping: the link is closed within the keepalive's period and timeout, and its
+    reason says so, not "connection lost (no close frame)"."""
+    over = asyncio.Event()
+
+    async def freeze(ws):
+        ws.transport.pause_reading()  # reads nothing from now on: no ping is answered
+        await asyncio.wait_for(over.wait(), 10)
+
+    server, url = await _serve(freeze)
+    events = []
+    client = RosbridgeClient(url, ping_interval=0.3, ping_timeout=0.3, max_backoff=5.0)
+    client.on_link(lambda up, reason: events.append((up, reason)))
+    try:
+        await client.start()
+        assert await client.wait_connected(3)
+        for _ in range(100):  # bounded: 0.3 + 0.3 s, then the close
+            if len(events) > 1:
+                break
+            await asyncio.sleep(0.05)
+    finally:
+        over.set()
+        await client.close()
+        server.close()
+    assert events[:2] == [(True, "connected"), (False, "no answer to a keepalive ping within 0.3 s")]
