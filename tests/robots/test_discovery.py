@@ -4,7 +4,8 @@ import asyncio
 
 import pytest
 
-from robots.discovery import discover, is_infra
+from robots.discovery import READ_RETRIES, discover, is_infra, rosapi
+from robots.rosbridge import RosbridgeTimeout
 from tests.robots.fakes import big_graph, robot_graph
 
 pytestmark = [pytest.mark.timeout(30)]
@@ -86,3 +87,29 @@ def test_demo_world_endpoints(paper_world):
     }
     assert found["robots"][0].actions == {"/robot1/move_base": "move_base_msgs/MoveBaseAction"}
     assert found["husky"][0].start_pose == pytest.approx([1.5, -1.3, 1.5708], abs=1e-3)
+
+
+class _LateOnce:
+    """A client whose endpoint answers each call only when asked again (the first answer came too late)."""
+
+    url = "ws://busy"
+
+    def __init__(self, silent_times: int) -> None:
+        self.silent_times, self.asked = silent_times, []
+
+    async def call_service(self, service, args=None):
+        self.asked.append(service)
+        if len(self.asked) <= self.silent_times:
+            raise RosbridgeTimeout(f"{self.url}: no answer to {service} within 3 s")
+        return {"value": '"tb3"'}
+
+
+def test_a_rosapi_read_answered_late_is_asked_once_more_before_the_endpoint_fails():
+    late = _LateOnce(silent_times=READ_RETRIES)
+    assert run(rosapi(late, "/rosapi/get_param", {"name": "/robot_name"})) == {"value": '"tb3"'}
+    assert late.asked == ["/rosapi/get_param"] * (READ_RETRIES + 1)
+
+    silent = _LateOnce(silent_times=READ_RETRIES + 1)
+    with pytest.raises(RosbridgeTimeout, match="no answer to /rosapi/get_param"):
+        run(rosapi(silent, "/rosapi/get_param", {"name": "/robot_name"}))
+    assert len(silent.asked) == READ_RETRIES + 1
