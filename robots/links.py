@@ -1,7 +1,7 @@
 """Liveness: one long-lived rosbridge link per registered endpoint, shared by the robots behind it.
 
-Each link is a reconnecting RosbridgeClient (backoff 0.1 s doubling to 1.6 s, WebSocket pings every second),
-so a restarted endpoint is back within about 2 s and every subscription made on the link is renewed by the
+Each link is a reconnecting RosbridgeClient (backoff 0.1 s doubling to 1.6 s, WebSocket pings every second,
+PING_TIMEOUT_S for the pong), so a restarted endpoint is back within about 2 s and every subscription made on the link is renewed by the
 client itself. A change of link state is written to the endpoint's robots (link_status, last_seen) and pushed
 through live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT seconds.
 
@@ -191,6 +191,20 @@ def targets_mark(urls: Iterable[str]) -> tuple:
 STOP_PUBLISH_S = 0.5  # one robot's zero on a link that is up; a stuck send never holds another robot's
 
 
+# A pong later than this closes the link (a killed endpoint is noticed at once, by its closed connection; a silent
+# one, frozen or cut off, within a second more). At 1 s, a saturated machine (1,000 robots on the cluster) had both
+# shards' links closed for pongs a second late: 1,000 robots said offline, instructions refused, every subscription
+# made again on top of the load, and whatever was queued on the links lost. A slow link still carries a stop.
+PING_TIMEOUT_S = 4.0
+
+
+def liveness_client(url: str) -> RosbridgeClient:
+    """The links process's link to one endpoint (see the module's docstring and PING_TIMEOUT_S)."""
+    return RosbridgeClient(
+        url, reconnect=True, ping_interval=1.0, ping_timeout=PING_TIMEOUT_S, max_backoff=1.6
+    )
+
+
 class LinkManager:
     """Keep one link per endpoint until stop() is called."""
 
@@ -284,7 +298,7 @@ class LinkManager:
         """Open a link to url and run the hooks on it (robots read first: if that fails, the next round retries)."""
         # not on Django's shared sync thread, where the link status writes (a push per robot) queue
         robots = await sync_to_async(endpoint_robots, thread_sensitive=False)(url) if self.hooks else []
-        client = RosbridgeClient(url, reconnect=True, ping_interval=1.0, max_backoff=1.6)
+        client = liveness_client(url)
         client.on_link(lambda up, reason, url=url: self._changed(url, up, reason))
         self.links[url] = client
         await client.start()

@@ -259,3 +259,33 @@ async def test_an_endpoint_that_stops_answering_is_closed_saying_so():
         await client.close()
         server.close()
     assert events[:2] == [(True, "connected"), (False, "no answer to a keepalive ping within 0.3 s")]
+
+
+async def test_the_links_processs_link_to_an_endpoint_that_answers_seconds_late_stays_up():
+    """A busy endpoint (a saturated machine) answers the links process's pings late: its link stays up, and its
+    robots online, while the pong comes within PING_TIMEOUT_S (at 1 s, 1,000 robots were said offline)."""
+    from robots.links import PING_TIMEOUT_S, liveness_client
+
+    assert PING_TIMEOUT_S > 2.5
+    over = asyncio.Event()
+
+    async def late(ws):
+        ws.transport.pause_reading()  # the first pings wait unread for 2.5 s, then are answered
+        await asyncio.sleep(2.5)
+        ws.transport.resume_reading()
+        await asyncio.wait_for(over.wait(), 10)
+
+    server, url = await _serve(late)
+    events = []
+    client = liveness_client(url)
+    client.on_link(lambda up, reason: events.append((up, reason)))
+    try:
+        await client.start()
+        assert await client.wait_connected(3)
+        await asyncio.sleep(4.0)
+        assert client.is_connected
+    finally:
+        over.set()
+        await client.close()
+        server.close()
+    assert events == [(True, "connected")]
