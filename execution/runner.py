@@ -286,11 +286,11 @@ def finish(execution: Execution, token: str, outcome: str, words: str) -> bool:
         Robot.objects.transition(
             execution.robot_id, OUTCOME_EVENT[outcome], words[:255], execution.instruction_id
         )
-        settle(execution.instruction_id, words if outcome == "succeeded" else "", changed=execution.robot_id)
+        settle(execution.instruction_id, changed=execution.robot_id)
     return bool(won)
 
 
-def settle(instruction_id: int, note: str = "", changed: int | None = None) -> None:
+def settle(instruction_id: int, changed: int | None = None) -> None:
     """Give the instruction its final status once every robot's share has one, pushed with every robot's task
     list; until then push the task list of the robot whose share `changed` (a claim or an end changes that
     robot's list only, and not the instruction: its status and words change with its first claim and its end).
