@@ -203,8 +203,9 @@ class Session:
 
     def _stamp_later(self, field_name: str) -> None:
         """Stamp the execution now, through the blocking pool, without waiting: the control loop never waits for
-        the database while its robot moves. (At 1,000 robots on the cluster a stamp after the first command
-        queued behind hundreds of robots' calls and held that loop for seconds, the robot turning on.)"""
+        the database while its robot moves. (With hundreds of robots' calls queued in the pool, as at 1,000
+        robots on the cluster, a stamp awaited after the first command would hold the loop as long, the robot
+        going on with that command.)"""
         self.stamps.append(
             asyncio.ensure_future(blocking.call(_stamp, self.execution, field_name, timezone.now()))
         )
