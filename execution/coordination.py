@@ -43,12 +43,8 @@ STOP_REDIS_TIMEOUT_S = 0.25  # a stop's flags wait this long at most: a frozen R
 log = logging.getLogger(__name__)
 
 RELEASE = "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('del', KEYS[1]) else return 0 end"
-RENEW = (
-    "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('pexpire', KEYS[1], ARGV[2]) "
-    "else return 0 end"
-)
-# Many locks at once (an executor's board): KEYS the locks, ARGV each one's token and time to live in turn; for
-# each, 1 renewed or 0 not ours any more. One script run instead of one per lock.
+# Renew locks (an executor's board, all of its own at once): KEYS the locks, ARGV each one's token and time to live
+# in turn; for each, 1 renewed or 0 not ours any more. One script run for all of them.
 RENEW_MANY = """
 local out = {}
 for i, k in ipairs(KEYS) do
@@ -106,10 +102,6 @@ class RobotLock:
 
     def acquire(self) -> bool:
         return bool(connection().set(self.key, self.token, nx=True, px=self.ttl_ms))
-
-    def renew(self) -> bool:
-        """Extend the lock; False if it was lost (expired and taken, or released)."""
-        return bool(connection().eval(RENEW, 1, self.key, self.token, self.ttl_ms))
 
     def release(self) -> None:
         connection().eval(RELEASE, 1, self.key, self.token)

@@ -1,9 +1,10 @@
 """Liveness: one long-lived rosbridge link per registered endpoint, shared by the robots behind it.
 
 Each link is a reconnecting RosbridgeClient (backoff 0.1 s doubling to 1.6 s, WebSocket pings every second,
-PING_TIMEOUT_S for the pong), so a restarted endpoint is back within about 2 s and every subscription made on the link is renewed by the
-client itself. A change of link state is written to the endpoint's robots (link_status, last_seen) and pushed
-through live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT seconds.
+PING_TIMEOUT_S for the pong), so a restarted endpoint is back within about 2 s and every subscription made on the
+link is renewed by the client itself. A change of link state is written to the endpoint's robots (link_status,
+last_seen) and pushed through live.robot_status at once; last_seen of online robots is refreshed every HEARTBEAT
+seconds.
 
 A link survives anything one endpoint sends (robots.rosbridge.client): a frame with wrong fields is dropped
 and logged, a frame that is not rosbridge or larger than the frame limit closes the connection and the link
