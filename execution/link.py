@@ -26,10 +26,11 @@ from robots import poses as pose_store
 from robots.commands import NAV_MOVE_BASE, NAV_NAV2, NAV_SIMPLE, CommandSurface
 from robots.models import Robot
 from robots.rosbridge import pool, sync
+from robots.rosbridge.client import throttle_for
 
 PHOTO_TICK_S = 0.25  # waiting for a camera frame, the session is checked this often (stops, its heartbeat)
-# A driven robot's odometry is followed at most at this period (rosbridge's throttle_rate; queue_length 1: the
-# newest), and each message is a control tick: 10 Hz, half a TurtleBot's own 20 Hz, for half the frames its
+# A driven robot's odometry is followed at most at this period (robots.rosbridge.client.throttle_for: the newest
+# message past the throttle, none held), and each message is a control tick: 10 Hz, half a TurtleBot's own 20 Hz, for half the frames its
 # executor and its robot's rosbridge handle (docs/scale.md). A stop does not wait for a tick: its flag wakes the
 # session between poses (execution.board, Lease.wake), so it is acted on one Redis round trip after its flag
 # (tests/execution/test_board.py, test_queueing.py); a turn or a drive comes to rest as near its goal as at 20 Hz
@@ -147,7 +148,10 @@ class RobotLink:
             raise LinkError(f"{self.robot.name}: cannot reach {self.robot.endpoint}: {exc}") from exc
         odometry = self.odometry
         await self._subscribe(
-            odometry.target, odometry.message_type or "nav_msgs/Odometry", self._on_odom, CONTROL_MS
+            odometry.target,
+            odometry.message_type or "nav_msgs/Odometry",
+            self._on_odom,
+            throttle_for(CONTROL_MS),
         )
         if self.amcl is not None:
             await self._subscribe(self.amcl.target, self.amcl.message_type or "", self._on_amcl)
@@ -157,8 +161,7 @@ class RobotLink:
         return self
 
     async def _subscribe(self, topic: str, type_: str, callback, throttle_rate: int = 0) -> None:
-        queue = 1 if throttle_rate else 0  # throttled: the newest message each period, never a backlog
-        self._subs.append(await self.client.subscribe(topic, type_, callback, throttle_rate, queue))
+        self._subs.append(await self.client.subscribe(topic, type_, callback, throttle_rate))
 
     @property
     def connected(self) -> bool:

@@ -44,6 +44,22 @@ MAX_QUEUE = 16
 KEEPALIVE_TIMEOUT = "keepalive ping timeout"  # the reason websockets closes a link with when no pong came
 
 
+# A subscription that wants one message each period asks rosbridge for this share of the period as its throttle_rate,
+# with queue_length 0 (throttle_for).
+THROTTLE_SHARE = 0.75
+
+
+def throttle_for(period_ms: int) -> int:
+    """The throttle_rate (ms) of a subscription that wants at most one message each period_ms, the freshest: asked
+    with queue_length 0, rosbridge's ThrottleMessageHandler drops a message inside the throttle before it is
+    serialised and sends the first one past it as it arrives. With a queue_length, its QueueMessageHandler would
+    hold every message instead (serialised, on a timer) and send one up to a publishing period old. Three quarters
+    of the period, not all of it: a publisher at a multiple of the rate (a TurtleBot's 20 Hz odometry for 10 Hz)
+    then has every k-th message pass though it comes a few ms early (at the full period, one early by a
+    millisecond is dropped and the next waited for: 6.7 Hz instead of 10)."""
+    return max(1, round(period_ms * THROTTLE_SHARE))
+
+
 @dataclass(eq=False)
 class Subscription:
     """A handle returned by subscribe(); pass it to unsubscribe()."""
