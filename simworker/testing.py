@@ -59,10 +59,19 @@ def touched(fleet: SimFleet, since: int = 0) -> list[tuple[float, str, str]]:
 
 
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    """A TCP port on 127.0.0.1 that nothing listens on right now (another process may take it before it is bound:
+    a server of the test's own is better started on bound_socket())."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def bound_socket() -> tuple[socket.socket, int]:
+    """A TCP socket bound to a free port of 127.0.0.1, and that port: a server given it (uvicorn's
+    `Server.run(sockets=[sock])`) listens where nothing else can have bound in between."""
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    return sock, sock.getsockname()[1]
 
 
 class RunningWorld:

@@ -11,7 +11,7 @@ from websockets.extensions.permessage_deflate import PerMessageDeflate
 
 from fleet import websocket
 from fleet.settings import BASE_DIR
-from simworker.testing import free_port
+from simworker.testing import bound_socket
 
 TEXT = (
     '{"type":"fleet.poses","rows":[' + ",".join(f"[{n},1.25,-0.5,3.1,0.0,0.3,{n}]" for n in range(300)) + "]}"
@@ -29,12 +29,12 @@ async def app(scope, receive, send):
 
 @pytest.fixture
 def server():
-    port = free_port()
+    sock, port = bound_socket()
     config = uvicorn.Config(
         app, host="127.0.0.1", port=port, log_level="warning", lifespan="off", ws=websocket.Protocol
     )
     served = uvicorn.Server(config)
-    thread = threading.Thread(target=served.run, daemon=True)
+    thread = threading.Thread(target=served.run, kwargs={"sockets": [sock]}, daemon=True)
     thread.start()
     deadline = time.monotonic() + 10
     while not served.started:

@@ -6,7 +6,7 @@ from execution.models import TimeSlot
 from fleet.testrun import chromium_path
 from places.models import Location, Map
 from robots.models import Binding, Robot
-from simworker.testing import free_port
+from simworker.testing import bound_socket, free_port
 
 
 def slot_hours() -> tuple[str, str]:
@@ -76,7 +76,7 @@ def _fresh_interpreter():
 
 @pytest.fixture
 def live_url(transactional_db, settings):
-    """The whole portal (HTTP and WebSockets) on a free port; the test's committed rows are what it serves."""
+    """The whole portal (HTTP and WebSockets) on a port bound first; the test's committed rows are what it serves."""
     import threading
     import time
     import uuid
@@ -89,7 +89,7 @@ def live_url(transactional_db, settings):
     # execution's Redis keys (stop flags live 10 min) must not carry over between runs that reuse robot ids
     settings.FLEET_EXEC_KEY_PREFIX = f"test:portal:{uuid.uuid4().hex[:8]}"
     _fresh_interpreter()
-    port = free_port()
+    sock, port = bound_socket()
     config = uvicorn.Config(
         application,
         host="127.0.0.1",
@@ -100,7 +100,7 @@ def live_url(transactional_db, settings):
         ws=Protocol,  # as every web server of the portal (fleet/websocket.py)
     )
     server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
+    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, name="uvicorn", daemon=True)
     thread.start()
     deadline = time.monotonic() + 10
     while not server.started:

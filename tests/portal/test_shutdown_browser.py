@@ -8,7 +8,7 @@ import time
 import pytest
 
 from robots.models import Robot
-from simworker.testing import free_port
+from simworker.testing import bound_socket
 from tests.portal.test_telemetry_browser import registered_world
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow, pytest.mark.timeout(180)]
@@ -25,21 +25,25 @@ class Said(logging.Handler):
         self.lines.append(record.getMessage())
 
 
-def serve(application, port: int):
+def serve(application):
+    """uvicorn in a thread on a socket bound first (simworker.testing.bound_socket); (server, thread, port)."""
     import uvicorn
 
+    sock, port = bound_socket()
     config = uvicorn.Config(
         application, host="127.0.0.1", port=port, log_level="info", lifespan="on",
         timeout_graceful_shutdown=GRACE_S,
     )  # fmt: skip
     server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, name="uvicorn-shutdown", daemon=True)
+    thread = threading.Thread(
+        target=server.run, kwargs={"sockets": [sock]}, name="uvicorn-shutdown", daemon=True
+    )
     thread.start()
     deadline = time.monotonic() + 15
     while not server.started:
         assert time.monotonic() < deadline and thread.is_alive(), "uvicorn did not start"
         time.sleep(0.05)
-    return server, thread
+    return server, thread, port
 
 
 def test_open_pages_do_not_hold_up_the_servers_shutdown(
@@ -52,10 +56,9 @@ def test_open_pages_do_not_hold_up_the_servers_shutdown(
 
     settings.FLEET_EXEC_KEY_PREFIX = f"test:shutdown:{uuid.uuid4().hex[:8]}"
     said = Said()
-    port = free_port()
-    url = f"http://127.0.0.1:{port}"
     with registered_world(fleet_admin, keys=("husky",)):
-        server, thread = serve(application, port)
+        server, thread, port = serve(application)
+        url = f"http://127.0.0.1:{port}"
         logging.getLogger("uvicorn.error").addHandler(said)  # after uvicorn configured its logging
         try:
             context = browser.new_context()
