@@ -37,6 +37,10 @@ WRITE_BATCH = 256  # frames joined into one socket write
 
 @dataclass
 class Subscription:
+    """One client's subscription to a topic: the ids it was asked under, and what they make of it together. A
+    message on the topic asks `due()` at the rate of its publisher, so the throttle, queue_length and compression
+    are worked out when an id comes or goes (`add`, `remove`), not for each message."""
+
     ids: dict[str | None, tuple[int, int]] = field(
         default_factory=dict
     )  # id -> (throttle_rate, queue_length)
@@ -45,32 +49,39 @@ class Subscription:
     held: deque = field(default_factory=deque)  # throttle with a queue_length: the newest, waiting their turn
     release: asyncio.TimerHandle | None = None  # when the next held one goes
     compressions: dict[str | None, str] = field(default_factory=dict)  # id -> compression asked for
+    # what the ids make together (as rosbridge's Subscription.update_params): the least throttle (s) and queue_length
+    throttle: float = 0.0
+    queue_length: int = 0
+    holds: bool = (
+        False  # a throttle with a queue_length: messages wait their turn (rosbridge's QueueMessageHandler)
+    )
+    compression: str = "none"  # the one compression all ids get: cbor over png over none
 
-    @property
-    def compression(self) -> str:
-        """The one compression all ids get, as rosbridge's Subscription.update_params picks it."""
+    def add(self, id_: str | None, throttle_rate: int, queue_length: int, compression: str) -> None:
+        """Subscribed (again) under this id."""
+        self.ids[id_] = (max(throttle_rate, 0), max(queue_length, 0))
+        self.compressions[id_] = compression
+        self._update()
+
+    def remove(self, id_: str | None) -> None:
+        """Unsubscribed under this id (the subscription ends when no id is left)."""
+        self.ids.pop(id_, None)
+        self.compressions.pop(id_, None)
+        self._update()
+
+    def _update(self) -> None:
+        self.throttle = min((t for t, _ in self.ids.values()), default=0) / 1000.0
+        self.queue_length = min((q for _, q in self.ids.values()), default=0)
+        self.holds = bool(self.throttle) and self.queue_length > 0
         asked = set(self.compressions.values())
-        return next((c for c in ("cbor", "png") if c in asked), "none")
-
-    @property
-    def throttle(self) -> float:
-        return min(t for t, _ in self.ids.values()) / 1000.0
-
-    @property
-    def queue_length(self) -> int:
-        return min(q for _, q in self.ids.values())
-
-    @property
-    def holds(self) -> bool:
-        """A throttle with a queue_length: messages wait their turn (rosbridge's QueueMessageHandler)."""
-        return bool(self.ids) and bool(self.throttle) and self.queue_length > 0
+        self.compression = next((c for c in ("cbor", "png") if c in asked), "none")
 
     def due(self) -> bool:
         """Whether a message now would be taken: held for its turn, or past its throttle (rosbridge's
         ThrottleMessageHandler drops a throttled one before serialising)."""
         if self.holds:
             return True
-        return not (self.ids and (throttle := self.throttle) and time.monotonic() - self.last_sent < throttle)
+        return not (self.throttle and time.monotonic() - self.last_sent < self.throttle)
 
     def end(self) -> None:
         """Unsubscribed: nothing held goes out any more."""
@@ -109,7 +120,7 @@ class Client:
                 return
             if not sub.due():
                 return
-            if (qlen := sub.queue_length if sub.ids else 0) and sub.queued >= qlen:
+            if (qlen := sub.queue_length) and sub.queued >= qlen:
                 self.dropped += 1
                 return
             sub.last_sent = time.monotonic()

@@ -162,18 +162,17 @@ class SimRobot:
         listened = [(topic, tpl) for topic, tpl in self._odom_templates if topic in server.subscribers]
         if not listened:
             return
-        x, y, yaw = self.odom_pose()
-        if self.odom_noise and self.body.vx:
+        wanted = [(topic, tpl) for topic, tpl in listened if server.wants(topic)]
+        pose = self.odom_pose() if wanted else None  # built only for a message that goes (before this drift)
+        if self.odom_noise and self.body.vx:  # the drift moves all the same
             rng, k = self.physics.rng, self.odom_noise * abs(self.body.vx) * 0.05
             self.drift[0] += rng.gauss(0, k)
             self.drift[1] += rng.gauss(0, k)
             self.drift[2] += rng.gauss(0, k)
         self.seq += 1  # a throttled subscriber sees gaps in it, as from a real publisher
-        wanted = [
-            (topic, tpl) for topic, tpl in listened if server.wants(topic)
-        ]  # the drift moved all the same
-        if not wanted:
+        if pose is None:
             return
+        x, y, yaw = pose
         vx, vy, wz = self.body.twist()
         sec = int(t)
         stamp = (sec, int((t - sec) * 1e9))

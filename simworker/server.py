@@ -287,8 +287,7 @@ class RosbridgeServer:
             raise TypeConflict(topic, self.types.type_name(type_), known)
         self.graph.node(BRIDGE_NODE).subs.add(topic)
         sub = client.subs.setdefault(topic, Subscription())
-        sub.ids[msg.get("id")] = (max(throttle, 0), max(qlen, 0))
-        sub.compressions[msg.get("id")] = compression
+        sub.add(msg.get("id"), throttle, qlen, compression)
         self.subscribers.setdefault(topic, {})[client] = sub
         if topic in self.latched:
             client.send(self.latched[topic])
@@ -298,8 +297,7 @@ class RosbridgeServer:
         sub = client.subs.get(topic)
         if sub is None:
             return
-        sub.ids.pop(msg.get("id"), None)
-        sub.compressions.pop(msg.get("id"), None)
+        sub.remove(msg.get("id"))
         if not sub.ids or "id" not in msg:
             self._remove_sub(client, topic)
 
