@@ -51,6 +51,8 @@ from portal.fanout import decode
 
 ROUND_WAIT_S = 5.0  # a round's commands not all seen by then: the next round goes (those are late, not lost)
 STOP_WAIT_S = 5.0  # a stop trial's zeros not all seen by then: the next trial goes (those are late, not lost)
+STOP_PHASE_S = 0.5  # staleness after a stop-all is told apart in steps of this (by_phase)
+INSTRUCTIONS_PHASE = "instructions (after the stop trials)"
 # Robots per cmd_vel link of the reception. A simulator queues at most SEND_QUEUE (1,000) messages for one client
 # and drops the oldest beyond (logged): one link for a shard's 500 robots could lose some of a burst's commands.
 RECEPTION_CHUNK = 100
@@ -209,9 +211,11 @@ async def connect(url: str, cookie: str):
     )
 
 
-async def browser(url: str, cookie: str, seen: dict, stale: list[float] | None, live: dict) -> None:
+async def browser(
+    url: str, cookie: str, seen: dict, stale: list[tuple[float, float]] | None, live: dict
+) -> None:
     """One dashboard: every fleet.poses batch it is pushed while live["on"], counted per robot, with each pose's
-    staleness; live["connected"] counts the dashboards connected so far.
+    staleness (when it came, how old it was in ms); live["connected"] counts the dashboards connected so far.
 
     Only the dashboards given `stale` read every pose (robots seen, staleness); the others count the rows of each
     batch without making poses of them (seen["poses"], seen["batches"]): the server does the same work for every
@@ -230,7 +234,7 @@ async def browser(url: str, cookie: str, seen: dict, stale: list[float] | None, 
             for pose in decode(json.loads(raw)):
                 seen[pose["id"]] += 1
                 if pose.get("t"):
-                    stale.append((now - pose["t"]) * 1000)
+                    stale.append((now, (now - pose["t"]) * 1000))
 
 
 def browsers(webs: list[str], cookie: str, clients: int, robots: int, seconds: float, pipe) -> None:
@@ -241,7 +245,7 @@ def browsers(webs: list[str], cookie: str, clients: int, robots: int, seconds: f
     async def main() -> dict:
         live = {"stop": asyncio.Event(), "on": False, "connected": 0}
         seen = [defaultdict(int) for _ in range(clients)]
-        stale: list[float] = []
+        stale: list[tuple[float, float]] = []
         start = time.monotonic()
         tasks = [
             asyncio.create_task(browser(webs[i % 2], cookie, seen[i], stale if i < DECODED else None, live))
@@ -275,7 +279,8 @@ def browsers(webs: list[str], cookie: str, clients: int, robots: int, seconds: f
                 + [s["poses"] / max(1, robots) / took for s in seen[DECODED:]]
             ),
             "batches_per_s_per_client": summarize([s["batches"] / took for s in seen[DECODED:]]),
-            "staleness_ms": summarize(stale),
+            "staleness_ms": summarize([ms for _, ms in stale]),
+            "staleness_samples": stale,  # (when, ms): measure() splits them by what the bench was doing
         }
 
     pipe.send(asyncio.run(main()))
@@ -327,7 +332,7 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
             if all((await reception.first_of(sent, angular)).values()):
                 break
         await asyncio.sleep(0.25)
-    stops = []  # when each trial's stop was sent
+    stops, stops_began = [], time.time()  # when each trial's stop was sent
     for _ in range(3):
         await turn_all(0.5)
         await asyncio.sleep(1.0)
@@ -338,6 +343,7 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
         while time.monotonic() < deadline and not all((await reception.first_of(since, 0.0)).values()):
             await asyncio.sleep(0.25)
     cpu_after, wall = cpu_seconds(), time.monotonic() - wall_before
+    stops_ended = time.time()  # the instructions come next (the dashboards may still be reading)
     # Each trial's zeros as seen by the end of the run, as the commands are: a zero seen after the trial's
     # STOP_WAIT_S is late, one never seen (before the next trial's stop) missing.
     stop_trials = []
@@ -369,6 +375,8 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
     under_instructions = await instructed(cluster, portal, reception, ids, commanders[0])
     gaps = await reception.stop()
     live = await asyncio.to_thread(results.recv) if await asyncio.to_thread(results.poll, 60) else {}
+    samples = live.pop("staleness_samples", [])
+    live["staleness_ms_by_phase"] = by_phase(samples, stops_began, stops, stops_ended)
     dashboards.join(10)
     for task in drains:
         task.cancel()
@@ -394,6 +402,32 @@ async def measure(cluster: Cluster, portal: Portal, ids: dict[str, int], clients
             "robots_stopped": 3 * len(names),
         },
     }
+
+
+def by_phase(
+    samples: list[tuple[float, float]], stops_began: float, stops: list[float], stops_ended: float
+) -> dict:
+    """Staleness while the rounds of commands went, in the stop trials by the time since the last stop-all was
+    sent (half-second steps; STOP_PHASE_S), and once the instructions began (LIVE_S may reach into them): where
+    a tail of staleness comes from."""
+    phases: dict[str, list[float]] = defaultdict(list)
+    for at, ms in samples:
+        last = max((t0 for t0 in stops if t0 <= at), default=None)
+        if at < stops_began:
+            phases["rounds"].append(ms)
+        elif at >= stops_ended:
+            phases[INSTRUCTIONS_PHASE].append(ms)
+        elif last is None:
+            phases["stop trials, before the first stop-all"].append(ms)
+        else:
+            step = math.floor((at - last) / STOP_PHASE_S) * STOP_PHASE_S
+            phases[f"{step:.1f}-{step + STOP_PHASE_S:.1f} s after a stop-all"].append(ms)
+    return {phase: summarize(phases[phase]) for phase in sorted(phases, key=_phase_order)}
+
+
+def _phase_order(phase: str) -> float:
+    first = {"rounds": -2.0, "stop trials, before the first stop-all": -1.0, INSTRUCTIONS_PHASE: math.inf}
+    return first.get(phase) or float(phase.split("-")[0])
 
 
 async def instructed(cluster: Cluster, portal: Portal, reception: Reception, ids: dict[str, int], ws) -> dict:
