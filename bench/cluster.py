@@ -716,9 +716,14 @@ def markdown(summary: dict) -> str:
             f"| {r['stop_all_ms']['p99']} / {r['stop_all_ms']['to_last_robot']} "
             f"| {stop_misses(r)} | {live['clients']} "
             f"| {live['robots_seen_per_client_min']} | {live.get('hz_per_robot_min')} / {live['hz_per_robot_p50']} "
-            f"| {live['staleness_p99_ms']} / {live.get('staleness_p99_under_instructions_ms')} "
+            f"| {live['staleness_p99_ms']} / {live.get('staleness_p99_under_instructions_ms') or '—'} "
             f"| {r['cpu_cores_total']} | {r['cpu_ms_per_s_per_robot']} | {r['load_average_at_start'][0]} |"
         )
+    lines += [
+        "",
+        "Staleness: of the teleop (the rounds and the stop trials) / of the instructions the dashboards' 12 s window "
+        "reaches into; — where a run did not tell them apart (before 2026-11-29's sixth session: one figure for both).",
+    ]
     instructed = {n: r["instructions"] for n, r in rows.items() if r.get("instructions")}
     if instructed:
         lines += [
