@@ -4,9 +4,9 @@ with a queue_length (robots.rosbridge.client.throttle_for, docs/scale.md, "sixth
     python -m bench.odometry_rate [--quick|--full] [--robots N] [--busy K] [--out DIR]
 
 One simulator process with N TurtleBot3s on the paper world's `extra` endpoint (20 Hz odometry each) and one
-client subscribed to every robot's odometry, alternately as the links process asks now (throttle_for(100) = 75 ms,
-queue_length 0) and as it asked before (100 ms, queue_length 1), then at 90 ms; K busy processes beside them take
-cores away, as the rest of a cluster does. Messages per robot per second in each window. Writes odometry_rate.json.
+client subscribed to every robot's odometry, alternately as a driven robot's link asks ("now": throttle_for(100) =
+75 ms, queue_length 0) and as everything asked before d58d7ac and the links process asks still ("before": 100 ms,
+queue_length 1), then at 90 ms; K busy processes beside them take cores away, as the rest of a cluster does. Messages per robot per second in each window. Writes odometry_rate.json.
 """
 
 from __future__ import annotations
@@ -61,9 +61,10 @@ async def rate(url: str, names: list[str], throttle: int, queue: int, seconds: f
 def run(cfg: dict) -> dict:
     windows = []
     with WorldProcess("paper", extra=cfg["robots"], endpoints=["extra"]) as sim:
-        names = [
-            spec.name for spec in load_world("paper").add_extra_robots(cfg["robots"])
-        ]  # as the sim names them
+        extra = load_world("paper").add_extra_robots(
+            cfg["robots"]
+        )  # the robots the simulator serves, by name
+        names = [spec.name for spec in extra]
         until = time.monotonic() + len(CONFIGS) * (cfg["seconds"] + SETTLE_S + 5)
         hogs = [multiprocessing.Process(target=busy, args=(until,), daemon=True) for _ in range(cfg["busy"])]
         for hog in hogs:

@@ -30,8 +30,8 @@ from robots.rosbridge.client import throttle_for
 
 PHOTO_TICK_S = 0.25  # waiting for a camera frame, the session is checked this often (stops, its heartbeat)
 # A driven robot's odometry is followed at most at this period (robots.rosbridge.client.throttle_for: the newest
-# message past the throttle, none held), and each message is a control tick: 10 Hz, half a TurtleBot's own 20 Hz, for half the frames its
-# executor and its robot's rosbridge handle (docs/scale.md). A stop does not wait for a tick: its flag wakes the
+# message past the throttle, none held), and each message is a control tick: 10 Hz, half a TurtleBot's own 20 Hz,
+# for half the frames its executor and its robot's rosbridge handle (docs/scale.md). A stop does not wait for a tick: its flag wakes the
 # session between poses (execution.board, Lease.wake), so it is acted on one Redis round trip after its flag
 # (tests/execution/test_board.py, test_queueing.py); a turn or a drive comes to rest as near its goal as at 20 Hz
 # (tests/execution/test_motion.py: commands 0.1 s apart).

@@ -52,9 +52,8 @@ class Subscription:
     # what the ids make together (as rosbridge's Subscription.update_params): the least throttle (s) and queue_length
     throttle: float = 0.0
     queue_length: int = 0
-    holds: bool = (
-        False  # a throttle with a queue_length: messages wait their turn (rosbridge's QueueMessageHandler)
-    )
+    # a throttle with a queue_length: messages wait their turn (rosbridge's QueueMessageHandler)
+    holds: bool = False
     compression: str = "none"  # the one compression all ids get: cbor over png over none
 
     def add(self, id_: str | None, throttle_rate: int, queue_length: int, compression: str) -> None:
