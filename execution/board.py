@@ -42,7 +42,16 @@ from django.conf import settings
 from redis.exceptions import RedisError, ResponseError
 
 from execution import blocking
-from execution.coordination import HEARTBEAT_S, LIVELY_S, RELEASE, RENEW_MANY, RobotLock, key
+from execution.coordination import (
+    HEARTBEAT_S,
+    LIVELY_S,
+    RELEASE,
+    RENEW_MANY,
+    RobotLock,
+    key,
+    presence_channel,
+    process_name,
+)
 from fleetcore import faults
 from robots import poses as pose_store
 
@@ -160,6 +169,9 @@ class Board:
         self._client: redis.asyncio.Redis | None = None
         self._storing: asyncio.Future | None = None
         self._nudged = asyncio.Event()  # a flag was raised somewhere: read now
+        self._present = (
+            asyncio.Event()
+        )  # subscribed to this process's presence channel (coordination.present)
 
     def lease(self, lock: RobotLock, lively: float = LIVELY_S) -> Lease:
         """Keep this acquired lock from now on (renewed while its command loop beats)."""
@@ -173,7 +185,9 @@ class Board:
     async def take(self, lock: RobotLock) -> Lease | None:
         """Acquire the lock in one round trip on the loop and keep it from now on; None: someone holds it.
         (Through the robots' blocking pool, an executor starting 50 robots queued each acquire behind the
-        others' database calls.) No answer within its bound raises: the lock, if it was set, lapses."""
+        others' database calls.) Only once this process is present (the watchdog takes a lock holder that is
+        not as gone); no presence or no answer within its bound raises: the lock, if it was set, lapses."""
+        await asyncio.wait_for(self._present.wait(), REDIS_TIMEOUT_S * 2)
         taken = self._redis().set(lock.key, lock.token, nx=True, px=lock.ttl_ms)
         return self.lease(lock) if await asyncio.wait_for(taken, REDIS_TIMEOUT_S * 2) else None
 
@@ -267,16 +281,19 @@ class Board:
 
     async def _listen(self) -> None:
         """Nudge the loop on every message of the flags channel; a lost subscription is made again (the ticks
-        go on meanwhile)."""
+        go on meanwhile). The same connection holds this process's presence (coordination.presence_channel)."""
         while True:
             try:
                 async with self._redis().pubsub() as pubsub:
-                    await pubsub.subscribe(key("flags"))
+                    await pubsub.subscribe(key("flags"), presence_channel(process_name()))
                     while True:
                         message = await pubsub.get_message(ignore_subscribe_messages=True, timeout=None)
                         if message is not None:
                             self._nudged.set()
+                        else:  # a confirmation: Redis registered both channels before answering
+                            self._present.set()
             except (RedisError, OSError):  # Redis away: the ticks see it too; subscribe again later
+                self._present.clear()
                 await asyncio.sleep(LISTEN_RETRY_S)
 
     def _store_poses(self, leases: list[Lease]) -> None:

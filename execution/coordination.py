@@ -4,7 +4,9 @@
   the holder's token, also stored on the Execution it runs, so a watchdog can tell a running Execution whose
   executor died (no lock, or someone else's) from a live one. The holder's board (execution/board.py) renews
   it every HEARTBEAT_S while the command loop beats: a killed or frozen executor lets it lapse within
-  LOCK_TTL_MS, and the scheduler's watchdog (execution/watchdog.py, every WATCHDOG_S) then stops the robot.
+  LOCK_TTL_MS, and the scheduler's watchdog (execution/watchdog.py, every WATCHDOG_S) then stops the robot. A
+  holder's process also stays subscribed to a presence channel of its own while it lives: a killed or crashed
+  process's subscription ends with its socket, and the watchdog stops its robots without waiting for the lapse.
 - A stop flag holds the time of the last stop of a robot; a runner stops when it is newer than its start.
 - A preempt flag names the Execution that interrupts the robot's current one.
 - A cancel flag holds who cancelled one Execution (one instruction cancelled); its runner stops it.
@@ -33,7 +35,9 @@ from redis.asyncio.retry import Retry as AsyncRetry
 from redis.backoff import NoBackoff
 from redis.retry import Retry
 
-LOCK_TTL_MS = 1000  # a dead executor's robot is found within this plus one watchdog period (under 2 s)
+LOCK_TTL_MS = (
+    1000  # a frozen executor's robot is found within this plus one watchdog period (a killed one's sooner)
+)
 HEARTBEAT_S = 0.25  # between renewals: three may be late before the lock lapses
 LIVELY_S = 5.0  # a command loop that has not beaten for this long is hung: the heartbeat stops renewing
 WATCHDOG_S = 0.25  # the scheduler process looks for lapsed locks this often
@@ -86,9 +90,36 @@ def key(*parts) -> str:
     return ":".join([prefix, *map(str, parts)])
 
 
+def process_name() -> str:
+    """This process as the tokens it makes name it: host:pid."""
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
 def new_token() -> str:
-    """A token naming this worker, process and thread uniquely."""
-    return f"{socket.gethostname()}:{os.getpid()}:{threading.get_ident()}:{uuid.uuid4().hex[:8]}"
+    """A token naming this worker, process and thread uniquely (its process first: holder_process)."""
+    return f"{process_name()}:{threading.get_ident()}:{uuid.uuid4().hex[:8]}"
+
+
+def holder_process(token: str) -> str | None:
+    """The process (host:pid) that made a token, or None for a token not made by new_token."""
+    host, _, rest = token.partition(":")
+    pid = rest.partition(":")[0]
+    return f"{host}:{pid}" if host and pid.isdigit() else None
+
+
+def presence_channel(process: str) -> str:
+    """The channel a process holding robot locks stays subscribed to while it lives (execution.board): Redis
+    drops the subscription the moment the process's socket closes, which a kill -9 or a crash does at once."""
+    return key("alive", process)
+
+
+def present(processes) -> dict[str, bool]:
+    """{process: whether it is subscribed to its presence channel now}, in one round trip (PUBSUB NUMSUB)."""
+    processes = list(processes)
+    if not processes:
+        return {}
+    counts = connection().pubsub_numsub(*(presence_channel(process) for process in processes))
+    return {process: count > 0 for process, (_, count) in zip(processes, counts, strict=True)}
 
 
 class RobotLock:

@@ -1,13 +1,19 @@
 """Find executions whose executor is lost, stop their robots and fail them; restart robots' stalled queues.
 
-A running execution carries the token of the runner that claimed it, and that runner's heartbeat renews the
-robot's lock under the same token every quarter second (execution.coordination.Heartbeat). When the lock is
-gone (or held by another token), the executor is lost: killed, frozen, or its host gone. The scheduler process,
-which stays up, looks every WATCHDOG_S: the robot gets a zero velocity and its navigation goal is cancelled at
-once, the execution is failed with the reason "executor lost", its instruction settled, its traffic reservations
-dropped (others then go round it as a robot standing there, instead of waiting out their lapse), and an
-executor_lost alert raised. To send that zero at once, the scheduler keeps a link open to the endpoint of every robot being
-driven (keep_links): connecting at that moment cost up to a second more on a busy machine.
+A running execution carries the token of the runner that claimed it, and that runner's process renews the
+robot's lock under the same token every quarter second (execution.board). The executor is lost when the lock is
+gone or held by another token (the process killed, frozen, or its host gone: LOST, up to LOCK_TTL_MS after), or
+when the process that holds it is gone (GONE): its presence subscription (coordination.present), which Redis
+drops as soon as the process's socket closes, missing at two looks GONE_S apart. A kill -9 or a crash is then
+seen a quarter to half a second after it, not a second or more: a turtlebot killed mid-turn at 2.4 rad/s came to
+rest 1.6-2.0 s after, 0.76 s of it braking (tests/chaos). A frozen process keeps its socket: its lock lapses.
+
+The scheduler process, which stays up, looks every WATCHDOG_S: the robot gets a zero velocity and its
+navigation goal is cancelled at once, the execution is failed with the reason "executor lost", its instruction
+settled, its traffic reservations dropped (others then go round it as a robot standing there, instead of
+waiting out their lapse), and an executor_lost alert raised. To send that zero at once, the scheduler keeps a
+link open to the endpoint of every robot being driven (keep_links): connecting at that moment cost up to a
+second more on a busy machine.
 
 An execution whose runner ended it (its robot halted) while the database refused to record that end is found the
 same way once its lock lapses: its runner kept the end's words in Redis (runner._unrecorded), and they are recorded
@@ -43,6 +49,8 @@ log = logging.getLogger(__name__)
 STALLED_AFTER = 3.0  # s a queued execution may wait for its task before the robot is kicked
 STOP_WAIT_S = 2.0  # s the records wait for a lost executor's robot's zero (it is still sent after)
 LOST = "executor lost: the process running it stopped renewing its lock; the robot was stopped"
+GONE = "executor lost: the process running it is gone (its connection to Redis closed); the robot was stopped"
+GONE_S = 0.2  # s a lock holder's process is missing before it is gone, not reconnecting: two looks at least
 
 
 def _running(robot_ids=None) -> list[Execution]:
@@ -52,9 +60,40 @@ def _running(robot_ids=None) -> list[Execution]:
     return list(running)
 
 
-def _lost(running: list[Execution]) -> list[Execution]:
+class _Absences:
+    """Since when each lock holder's process has been missing from its presence channel, as of the last look."""
+
+    def __init__(self) -> None:
+        self.since: dict[str, float] = {}
+
+    def gone(self, processes: set[str]) -> set[str]:
+        """The processes missing for GONE_S or more (at two looks at least), of these."""
+        now = time.monotonic()
+        present = coordination.present(processes)
+        self.since = {process: self.since.get(process, now) for process, here in present.items() if not here}
+        return {process for process, since in self.since.items() if now - since >= GONE_S}
+
+
+_absences = _Absences()
+
+
+def _lost(running: list[Execution]) -> dict[Execution, str]:
+    """{execution: why} for those whose executor is lost: their robot's lock lapsed or taken (LOST), or held by
+    a process gone (GONE): its lock is then released, so a live holder (its presence lost, not its life) stops
+    too, and another executor takes the robot at once."""
     holders = coordination.lock_holders({execution.robot_id for execution in running})
-    return [execution for execution in running if holders.get(execution.robot_id) != execution.worker]
+    lost, held = {}, {}
+    for execution in running:
+        if holders.get(execution.robot_id) != execution.worker:
+            lost[execution] = LOST
+        elif process := coordination.holder_process(execution.worker):
+            held[execution] = process
+    gone = _absences.gone(set(held.values())) if held else set()
+    for execution, process in held.items():
+        if process in gone:
+            lost[execution] = GONE
+            coordination.RobotLock(execution.robot_id, execution.worker).release()
+    return lost
 
 
 def recover(robot_ids=None) -> list[int]:
@@ -63,7 +102,8 @@ def recover(robot_ids=None) -> list[int]:
     keep_links(execution.robot.endpoint for execution in running)
     lost = _lost(running)
     said = coordination.unrecorded_ends(execution.pk for execution in lost) if lost else {}
-    failed = [execution for execution in lost if _claim_failure(execution, said.get(execution.pk, LOST))]
+    why = {execution.pk: said.get(execution.pk, reason) for execution, reason in lost.items()}
+    failed = [execution for execution in lost if _claim_failure(execution, why[execution.pk])]
     if not failed:
         return []
     started = time.monotonic()
@@ -71,7 +111,8 @@ def recover(robot_ids=None) -> list[int]:
     pending = dict(stops)
     try:  # each robot's bookkeeping once its own zero is out: a slow or unreachable robot delays no other
         for done in as_completed(stops, timeout=STOP_WAIT_S):
-            _fail(pending.pop(done), said)
+            execution = pending.pop(done)
+            _fail(execution, why[execution.pk], execution.pk in said)
     except FuturesTimeout:  # its zero still being sent (the stop goes on): the record does not wait for it
         log.warning(
             "executor lost: zeros not out after %.1f s to %s",
@@ -79,28 +120,25 @@ def recover(robot_ids=None) -> list[int]:
             [e.robot.name for e in pending.values()],
         )
         for execution in pending.values():
-            _fail(execution, said)
+            _fail(execution, why[execution.pk], execution.pk in said)
     log.info(
         "executor lost: %d robots stopped and settled in %.2f s", len(failed), time.monotonic() - started
     )
     return [execution.pk for execution in failed]
 
 
-def _fail(execution: Execution, said: dict[int, str]) -> None:
-    """The records of one lost execution: its claims freed, its robot failed, its instruction settled, an alert."""
-    why = said.get(execution.pk, LOST)
+def _fail(execution: Execution, why: str, unrecorded: bool) -> None:
+    """The records of one lost execution: its claims freed, its robot failed, its instruction settled, an alert
+    (unrecorded: its runner ended it and the database refused the record, so no executor was lost)."""
     # its route and claims, which nobody renews now, free at once
     traffic_state.release(execution.robot, None)
     Robot.objects.transition(execution.robot_id, Event.FAIL, why[:255], execution.instruction_id)
     settle(execution.instruction_id)
-    if execution.pk in said:  # its runner ended it, the database refused the record: no executor was lost
+    if unrecorded:
         coordination.forget_unrecorded_end(execution.pk)
         return
     alerts.raise_alert(
-        "executor_lost",
-        execution.robot,
-        f"instruction #{execution.instruction_id}: {LOST}",
-        execution.event,
+        "executor_lost", execution.robot, f"instruction #{execution.instruction_id}: {why}", execution.event
     )
 
 

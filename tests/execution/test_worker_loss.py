@@ -98,9 +98,10 @@ def test_killed_executor_leaves_the_robot_at_rest_and_the_instruction_failed(
     wait_for(lambda: at_rest_after(sim, "turtlebot", killed_at), timeout=AT_REST_S, what="the robot at rest")
     assert wait_final(instruction, timeout=FINAL_S - (time.monotonic() - killed)).status == "failed"
     execution.refresh_from_db()
-    assert (execution.status, execution.error) == ("failed", watchdog.LOST)
+    # its process's presence dropped with its socket: found gone, not at its lock's lapse
+    assert (execution.status, execution.error) == ("failed", watchdog.GONE)
     assert "executor lost" in Instruction.objects.get(pk=instruction.pk).outcome
-    assert transitions("turtlebot")[-1][:3] == ("motion", "ready", watchdog.LOST)
+    assert transitions("turtlebot")[-1][:3] == ("motion", "ready", watchdog.GONE)
     lost = Alert.objects.open().filter(kind="executor_lost")
     wait_for(lost.exists, timeout=5, what="the executor_lost alert (raised after the settle)")
     assert lost.get().robot.name == "turtlebot" and f"#{instruction.pk}" in lost.get().message
@@ -110,6 +111,26 @@ def test_killed_executor_leaves_the_robot_at_rest_and_the_instruction_failed(
     parked = sim.pose("turtlebot")
     wait_for(lambda: sim.call(lambda: sim.fleet.physics.time) > killed_at + 4.0, timeout=10, what="a while")
     assert math.dist(sim.pose("turtlebot")[:2], parked[:2]) < 0.01  # and it stays at rest
+
+
+def test_a_frozen_executor_is_found_lost_when_its_lock_lapses(
+    turtle_sim, executor_process, scheduler_process, fleet_admin
+):
+    """SIGSTOP keeps the process's sockets, so its presence: its lock, no longer renewed, lapses instead, and the
+    robot is stopped all the same."""
+    sim = turtle_sim
+    instruction, execution = start_moving(sim, fleet_admin)
+    os.killpg(executor_process.pid, signal.SIGSTOP)
+    try:
+        frozen_at = sim.call(lambda: sim.fleet.physics.time)
+        wait_for(
+            lambda: at_rest_after(sim, "turtlebot", frozen_at), timeout=AT_REST_S, what="the robot at rest"
+        )
+        assert wait_final(instruction, timeout=FINAL_S).status == "failed"
+        execution.refresh_from_db()
+        assert (execution.status, execution.error) == ("failed", watchdog.LOST)
+    finally:
+        os.killpg(executor_process.pid, signal.SIGKILL)
 
 
 def test_another_executor_takes_over_the_robot_of_one_killed(
