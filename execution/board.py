@@ -281,20 +281,29 @@ class Board:
 
     async def _listen(self) -> None:
         """Nudge the loop on every message of the flags channel; a lost subscription is made again (the ticks
-        go on meanwhile). The same connection holds this process's presence (coordination.presence_channel)."""
-        while True:
-            try:
-                async with self._redis().pubsub() as pubsub:
-                    await pubsub.subscribe(key("flags"), presence_channel(process_name()))
-                    while True:
-                        message = await pubsub.get_message(ignore_subscribe_messages=True, timeout=None)
-                        if message is not None:
-                            self._nudged.set()
-                        else:  # a confirmation: Redis registered both channels before answering
-                            self._present.set()
-            except (RedisError, OSError):  # Redis away: the ticks see it too; subscribe again later
-                self._present.clear()
-                await asyncio.sleep(LISTEN_RETRY_S)
+        go on meanwhile). The same connection holds this process's presence: subscribed to its channel, and
+        named after it too (CLIENT LIST shows which executors are present; a test cuts just this one)."""
+        presence = presence_channel(process_name())
+        client = redis.asyncio.Redis.from_url(
+            settings.REDIS_URL, socket_connect_timeout=REDIS_TIMEOUT_S, client_name=presence
+        )
+        try:
+            while True:
+                try:
+                    async with client.pubsub() as pubsub:
+                        await pubsub.subscribe(key("flags"), presence)
+                        while True:
+                            message = await pubsub.get_message(ignore_subscribe_messages=True, timeout=None)
+                            if message is not None:
+                                self._nudged.set()
+                            else:  # a confirmation: Redis registered both channels before answering
+                                self._present.set()
+                except (RedisError, OSError):  # Redis away: the ticks see it too; subscribe again later
+                    self._present.clear()
+                    await asyncio.sleep(LISTEN_RETRY_S)
+        finally:
+            with contextlib.suppress(Exception):  # closing a link to a Redis that is away
+                await client.aclose()
 
     def _store_poses(self, leases: list[Lease]) -> None:
         """The poses kept since the last tick, in one batch off the loop (one batch in flight at a time)."""

@@ -133,6 +133,31 @@ def test_a_frozen_executor_is_found_lost_when_its_lock_lapses(
         os.killpg(executor_process.pid, signal.SIGKILL)
 
 
+def test_an_executor_that_only_lost_its_presence_stops_its_robot_too(
+    turtle_sim, executor_process, scheduler_process, fleet_admin
+):
+    """The process alive, its presence connection cut (CLIENT KILL of just that one): the watchdog takes it as
+    gone and releases its lock, and its runner, told at its next renewal that the lock is not its own, stops
+    too. The robot ends at rest and stays there: nothing drives on under an execution recorded as failed."""
+    sim = turtle_sim
+    instruction, execution = start_moving(sim, fleet_admin)
+    redis_ = coordination.connection()
+    name = coordination.presence_channel(coordination.holder_process(execution.worker))
+    cut = [client["id"] for client in redis_.client_list() if client.get("name") == name]
+    assert len(cut) == 1, redis_.client_list()
+    redis_.client_kill_filter(_id=cut[0])
+    cut_at = sim.call(lambda: sim.fleet.physics.time)
+
+    wait_for(lambda: at_rest_after(sim, "turtlebot", cut_at), timeout=AT_REST_S, what="the robot at rest")
+    assert wait_final(instruction, timeout=FINAL_S).status == "failed"
+    execution.refresh_from_db()
+    assert (execution.status, execution.error) == ("failed", watchdog.GONE)
+    parked = sim.pose("turtlebot")
+    wait_for(lambda: sim.call(lambda: sim.fleet.physics.time) > cut_at + 4.0, timeout=10, what="a while")
+    assert math.dist(sim.pose("turtlebot")[:2], parked[:2]) < 0.01  # and it stays at rest
+    assert executor_process.poll() is None  # the process lived through it
+
+
 def test_another_executor_takes_over_the_robot_of_one_killed(
     turtle_sim, executor_process, scheduler_process, fleet_admin
 ):
