@@ -507,18 +507,20 @@ async def instructed(cluster: Cluster, portal: Portal, reception: Reception, ids
 
 async def instruct(portal: Portal, text: str, ids: dict[str, int]) -> tuple[dict, dict[str, float]]:
     """The text to these robots, INSTRUCTION_CHUNK at a time, as a page's selection (POST /api/instructions):
-    what was posted, and when each robot's instruction was sent."""
+    what was posted (with each POST's time to its answer: post_ms), and when each robot's instruction was sent."""
     names = sorted(ids)
-    posted, sent = [], {}
+    posted, sent, took = [], {}, []
     for i in range(0, len(names), INSTRUCTION_CHUNK):
         chunk = names[i : i + INSTRUCTION_CHUNK]
         at = time.time()
         body = {"text": text, "robot_ids": [ids[name] for name in chunk]}
         posted.append(await asyncio.to_thread(portal.post, "instructions", body))
+        took.append((time.time() - at) * 1000)
         sent.update(dict.fromkeys(chunk, at))
     summary = {
         "text": text,
         "instructions": len(posted),
+        "post_ms": summarize(took),
         "ids": [p["id"] for p in posted],
         "at_post": dict(Counter(p["status"] for p in posted)),
         # why, for those the portal refused at once (robot names taken out)
