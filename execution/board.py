@@ -169,9 +169,8 @@ class Board:
         self._client: redis.asyncio.Redis | None = None
         self._storing: asyncio.Future | None = None
         self._nudged = asyncio.Event()  # a flag was raised somewhere: read now
-        self._present = (
-            asyncio.Event()
-        )  # subscribed to this process's presence channel (coordination.present)
+        # subscribed to this process's presence channel (coordination.present)
+        self._present = asyncio.Event()
 
     def lease(self, lock: RobotLock, lively: float = LIVELY_S) -> Lease:
         """Keep this acquired lock from now on (renewed while its command loop beats)."""
@@ -187,7 +186,8 @@ class Board:
         (Through the robots' blocking pool, an executor starting 50 robots queued each acquire behind the
         others' database calls.) Only once this process is present (the watchdog takes a lock holder that is
         not as gone); no presence or no answer within its bound raises: the lock, if it was set, lapses."""
-        await asyncio.wait_for(self._present.wait(), REDIS_TIMEOUT_S * 2)
+        if not self._present.is_set():  # (wait_for makes a task: not for every robot's start once present)
+            await asyncio.wait_for(self._present.wait(), REDIS_TIMEOUT_S * 2)
         taken = self._redis().set(lock.key, lock.token, nx=True, px=lock.ttl_ms)
         return self.lease(lock) if await asyncio.wait_for(taken, REDIS_TIMEOUT_S * 2) else None
 

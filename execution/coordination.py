@@ -35,9 +35,8 @@ from redis.asyncio.retry import Retry as AsyncRetry
 from redis.backoff import NoBackoff
 from redis.retry import Retry
 
-LOCK_TTL_MS = (
-    1000  # a frozen executor's robot is found within this plus one watchdog period (a killed one's sooner)
-)
+# a frozen executor's robot is found within this plus one watchdog period (a killed one's sooner: its presence)
+LOCK_TTL_MS = 1000
 HEARTBEAT_S = 0.25  # between renewals: three may be late before the lock lapses
 LIVELY_S = 5.0  # a command loop that has not beaten for this long is hung: the heartbeat stops renewing
 WATCHDOG_S = 0.25  # the scheduler process looks for lapsed locks this often

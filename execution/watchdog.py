@@ -6,7 +6,8 @@ gone or held by another token (the process killed, frozen, or its host gone: LOS
 when the process that holds it is gone (GONE): its presence subscription (coordination.present), which Redis
 drops as soon as the process's socket closes, missing at two looks GONE_S apart. A kill -9 or a crash is then
 seen a quarter to half a second after it, not a second or more: a turtlebot killed mid-turn at 2.4 rad/s came to
-rest 1.6-2.0 s after, 0.76 s of it braking (tests/chaos). A frozen process keeps its socket: its lock lapses.
+rest 1.6-2.0 s after it by the lock's lapse (0.76 s of that braking), 0.8-1.1 s by its presence (tests/chaos).
+A frozen process keeps its socket: its lock lapses.
 
 The scheduler process, which stays up, looks every WATCHDOG_S: the robot gets a zero velocity and its
 navigation goal is cancelled at once, the execution is failed with the reason "executor lost", its instruction
@@ -88,7 +89,7 @@ def _lost(running: list[Execution]) -> dict[Execution, str]:
             lost[execution] = LOST
         elif process := coordination.holder_process(execution.worker):
             held[execution] = process
-    gone = _absences.gone(set(held.values())) if held else set()
+    gone = _absences.gone(set(held.values()))  # every pass: a look with none held forgets the absences
     for execution, process in held.items():
         if process in gone:
             lost[execution] = GONE

@@ -203,17 +203,22 @@ def unbatched(message: dict) -> list[dict]:
     return message["messages"] if message.get("type") == BATCH else [message]
 
 
+def _by_group(pushes: list[tuple[str, dict]]) -> dict[str, list[dict]]:
+    """Each group's payloads in their order, the groups in the order of their first push."""
+    by_group: dict[str, list[dict]] = {}
+    for group, payload in pushes:
+        by_group.setdefault(group, []).append(payload)
+    return by_group
+
+
 def _batched(pushes: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
     """The pushes to each group as one message per BATCH_MAX: a push costs the sender about seven Redis round
     trips (channels_redis' group_send) and each web process's reader four, whatever its size; a stop of 100
     robots pushed 100 statuses to the fleet group (bench.cluster, redis-cli MONITOR: most of a web process's
     Redis commands). Each group's pushes keep their order; there is no order between groups (each has its own
     readers, and a page reads one group)."""
-    by_group: dict[str, list[dict]] = {}
-    for group, payload in pushes:
-        by_group.setdefault(group, []).append(payload)
     out = []
-    for group, payloads in by_group.items():
+    for group, payloads in _by_group(pushes).items():
         for start in range(0, len(payloads), BATCH_MAX):
             chunk = payloads[start : start + BATCH_MAX]
             out.append((group, chunk[0] if len(chunk) == 1 else {"type": BATCH, "messages": chunk}))
@@ -244,9 +249,6 @@ async def _send_each(layer, pushes: list[tuple[str, dict]]) -> None:
     no page sees an order between groups. One after the other, an instruction to 50 robots (the fleet's group and
     each robot's page group: 51 group_sends of a Redis round trip or more each) held its POST's answer 60 ms on
     an idle cluster (py-spy, docs/scale.md)."""
-    by_group: dict[str, list[dict]] = {}
-    for group, payload in pushes:
-        by_group.setdefault(group, []).append(payload)
 
     async def one_group(group: str, payloads: list[dict]) -> None:
         for payload in payloads:
@@ -254,7 +256,7 @@ async def _send_each(layer, pushes: list[tuple[str, dict]]) -> None:
                 return  # one failed: the rest are skipped, as send skips them
             await _send_logged(layer, group, payload)
 
-    groups = list(by_group.items())
+    groups = list(_by_group(pushes).items())
     for start in range(0, len(groups), GROUPS_AT_ONCE):
         await asyncio.gather(
             *(one_group(group, payloads) for group, payloads in groups[start : start + GROUPS_AT_ONCE])

@@ -64,3 +64,14 @@ def test_a_lock_token_names_its_process():
     assert coordination.holder_process(token) == coordination.process_name()
     assert coordination.process_name().endswith(f":{os.getpid()}")
     assert coordination.holder_process("someone else") is None  # not made by new_token: its lock's lapse only
+
+
+def test_a_look_without_the_process_forgets_its_absence():
+    """Missing, then no longer holding a lock (a look without it), then holding one again and missing once: that
+    is its first look missing, not a second one."""
+    missing = f"{socket.gethostname()}:{2**22 + 9}"
+    absences = watchdog._Absences()
+    assert absences.gone({missing}) == set()
+    time.sleep(watchdog.GONE_S)
+    assert absences.gone(set()) == set()  # none held: nothing asked of Redis, and the absence forgotten
+    assert absences.gone({missing}) == set()
