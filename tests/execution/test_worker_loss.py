@@ -152,8 +152,15 @@ def test_an_executor_that_only_lost_its_presence_stops_its_robot_too(
     assert wait_final(instruction, timeout=FINAL_S).status == "failed"
     execution.refresh_from_db()
     assert (execution.status, execution.error) == ("failed", watchdog.GONE)
+    # the runner learns its lock is gone at its next renewal (HEARTBEAT_S) and may send one command more before
+    # its own zero (CI 2026-11-29: 0.038 m after the watchdog's zero): at rest from then on
+    settled_at = sim.call(lambda: sim.fleet.physics.time) + 1.0
+    wait_for(
+        lambda: sim.call(lambda: sim.fleet.physics.time) > settled_at, timeout=10, what="the runner's renewal"
+    )
+    wait_for(lambda: at_rest(sim, "turtlebot"), timeout=AT_REST_S, what="the robot at rest after its runner")
     parked = sim.pose("turtlebot")
-    wait_for(lambda: sim.call(lambda: sim.fleet.physics.time) > cut_at + 4.0, timeout=10, what="a while")
+    wait_for(lambda: sim.call(lambda: sim.fleet.physics.time) > settled_at + 4.0, timeout=10, what="a while")
     assert math.dist(sim.pose("turtlebot")[:2], parked[:2]) < 0.01  # and it stays at rest
     assert executor_process.poll() is None  # the process lived through it
 
