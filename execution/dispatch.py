@@ -35,6 +35,7 @@ from fleetcore.choice import ALL, RobotChoice
 from fleetcore.interpretation import Interpretation
 from fleetcore.states import Admission, Event
 from fleetcore.steps import Step
+from interpreter.forms import read_back
 from robots import poses as pose_store
 from robots.models import Robot
 
@@ -281,6 +282,19 @@ class Plan:
 
     per_robot: dict[Robot, list[dict]]
     notes: list[str] = field(default_factory=list)
+    said: dict[int, str] = field(default_factory=dict)  # a step's words as the page's selection made it
+
+    def read_back(self, parse: dict) -> dict:
+        """The stored parse with each step the selection gave robots said with them: the console's parse line
+        said "a robot the portal chooses" for robots the person had chosen (the interpreter reads the text
+        before the selection is applied)."""
+        if not self.said:
+            return parse
+        lines = list(parse.get("read_back") or ())
+        lines += [""] * (max(self.said) + 1 - len(lines))
+        for index, words in self.said.items():
+            lines[index] = words
+        return {**parse, "read_back": lines}
 
     def items(self):
         return self.per_robot.items()
@@ -312,13 +326,14 @@ def plan(
         for pk, p in pose_store.known_poses(Robot.objects.only("pk", "start_pose")).items()
     }
     chosen: list[str] | None = _selected_names(selected)
-    said = False  # whom the page's selection chose has been said
-    for checked in steps:
+    said: dict[int, str] = {}  # the steps the page's selection gave robots, in words
+    for index, checked in enumerate(steps):
         if checked.robots.unnamed and chosen:
             if selected and not said:
                 notes.append(chosen_words(chosen, "selected on the page"))
-                said = True
             checked = replace(checked, robots=RobotChoice.named(*chosen))
+            if selected:
+                said[index] = read_back(checked.to_dict())
         robots, why = resolve_robots(checked, moment, check_schedule, user)
         if checked.robots.mode == ALL or checked.robots.filtered:
             robots = _unheld(robots, notes)
@@ -339,7 +354,7 @@ def plan(
     if not per_robot:
         raise Refused("The instruction has no step a robot can do.")
     _check_access(robots_by_id.values(), user, source)
-    return Plan({robots_by_id[pk]: steps for pk, steps in per_robot.items()}, notes)
+    return Plan({robots_by_id[pk]: steps for pk, steps in per_robot.items()}, notes, said)
 
 
 def _check_access(robots, user, source: str) -> None:
@@ -424,8 +439,9 @@ def dispatch(instruction: Instruction, plan: Plan) -> list[Execution]:
     ]
     instruction.robots.set([robot.pk for robot in per_robot])
     outcome = "; ".join(plan.notes)[:4000]
+    instruction.parse = plan.read_back(instruction.parse or {})
     Instruction.objects.filter(pk=instruction.pk).update(
-        status=Instruction.Status.QUEUED, dispatched_at=now, outcome=outcome
+        status=Instruction.Status.QUEUED, dispatched_at=now, outcome=outcome, parse=instruction.parse
     )
     instruction.status, instruction.dispatched_at, instruction.outcome = (
         Instruction.Status.QUEUED,

@@ -137,6 +137,23 @@ def test_the_robots_selected_on_the_page_take_an_instruction_naming_none(fleet, 
     assert list(named.robots.values_list("pk", flat=True)) == [near.pk]  # the text's name wins
 
 
+@pytest.mark.usefixtures("seeded_ontology")
+def test_the_parse_line_of_an_instruction_to_selected_robots_names_them(fleet, fleet_admin, no_runner):
+    """The console's parse line said "a robot the portal chooses" for the robots the person had selected: the
+    interpreter reads the text before the selection is applied. Stored, it says them; a name in the text stays."""
+    a, c = fleet("a", -4.0, -4.0), fleet("c", -4.0, 4.0)
+    fleet("b", 1.0, 4.6)
+    instruction = submit("turn left 90 degrees", fleet_admin, robot_ids=[c.pk, a.pk])
+    assert sorted(instruction.robots.values_list("name", flat=True)) == ["a", "c"]
+    stored = Instruction.objects.get(pk=instruction.pk)
+    assert instruction.parse == stored.parse
+    [line] = stored.parse["read_back"]
+    assert "chooses" not in line and line.startswith("turn_by c") and " a " in f"{line} ", line
+    named = submit("turn b left 90 degrees", fleet_admin, robot_ids=[c.pk])
+    assert Instruction.objects.get(pk=named.pk).parse["read_back"] == named.parse["read_back"]
+    assert named.parse["read_back"][0].startswith("turn_by b"), named.parse
+
+
 @pytest.mark.django_db(transaction=True)  # the scheduler's tick closes old connections
 def test_nobody_free_the_instruction_waits_and_is_allocated_when_one_is(fleet, fleet_admin, no_runner):
     busy = fleet("busy", 1.0, 4.6, state="motion")

@@ -30,6 +30,8 @@ def test_typed_text_naming_no_robot_goes_to_the_ticked_robots(login, operator, f
     instruction = Instruction.objects.get(text="wait 3 seconds")
     assert list(instruction.robots.values_list("name", flat=True)) == ["turtlebot"]
     assert instruction.executions.get().steps[0]["amount"] == 3.0
+    line = page.locator(".steps li").first.text_content()  # the ticked robot, not "the portal chooses"
+    assert line.startswith("wait turtlebot") and "chooses" not in line, line
     danger, badge = page.evaluate(
         """() => {
         const probe = document.createElement("span");
