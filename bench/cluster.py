@@ -59,6 +59,9 @@ INSTRUCTIONS_PHASE = "instructions (after the stop trials)"
 # and drops the oldest beyond (logged): one link for a shard's 500 robots could lose some of a burst's commands.
 RECEPTION_CHUNK = 100
 DECODED = 5  # dashboards that decode every pose (robots seen, staleness); the rest count poses per batch
+FRAME_TYPE = re.compile(
+    r'\{"type":"([^"]+)"'
+)  # a page frame's type, as portal.consumers writes it (first key)
 INSTRUCTION_CHUNK = 50  # robots per instruction when every robot is instructed (a page's selection)
 ODOMETRY_MS = 1000  # the instructed phase's odometry watch, per robot (throttled at the shards)
 SAID_WITHIN_DEG = 5.0  # an outcome's degrees this near the shard's odometry (1 Hz, read at rest) are true
@@ -225,7 +228,12 @@ async def browser(
     async with await connect(url, cookie) as ws:
         live["connected"] += 1
         async for now, raw in frames.until(ws, live["stop"]):
-            if not live["on"] or '"fleet.poses"' not in raw:
+            if not live["on"]:
+                continue
+            live["frames"] += 1  # every frame a dashboard is sent: each one a socket write for the web
+            kind = FRAME_TYPE.match(raw)
+            live["kinds"][kind.group(1) if kind else "?"] += 1
+            if '"fleet.poses"' not in raw:
                 continue
             if (
                 stale is None
@@ -245,7 +253,7 @@ def browsers(webs: list[str], cookie: str, clients: int, robots: int, seconds: f
     staleness per client, and connection errors."""
 
     async def main() -> dict:
-        live = {"stop": asyncio.Event(), "on": False, "connected": 0}
+        live = {"stop": asyncio.Event(), "on": False, "connected": 0, "frames": 0, "kinds": Counter()}
         seen = [defaultdict(int) for _ in range(clients)]
         stale: list[tuple[float, float]] = []
         start = time.monotonic()
@@ -281,6 +289,8 @@ def browsers(webs: list[str], cookie: str, clients: int, robots: int, seconds: f
                 + [s["poses"] / max(1, robots) / took for s in seen[DECODED:]]
             ),
             "batches_per_s_per_client": summarize([s["batches"] / took for s in seen[DECODED:]]),
+            "frames_per_s_per_client": round(live["frames"] / took / clients, 2),
+            "frames_by_type": dict(live["kinds"].most_common()),  # a batch frame is one, whatever it holds
             "staleness_samples": stale,  # (when, ms): measure() splits them by what the bench was doing
         }
 

@@ -9,7 +9,6 @@ unknown, refused or dropped message is answered with a ``command.result`` saying
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from execution.held_teleop import HeldTeleop
 from execution.instructions import Reading, submit, understand
 from execution.link import LinkError
 from execution.models import Instruction
+from fleetcore import jsontext
 from interpreter.service import warm_up
 from portal import feeds, inspector, snapshots, socket_input
 from portal.fanout import EventFanout, PoseFanout
@@ -238,11 +238,12 @@ async def _accept_user(consumer) -> object | None:
 
 
 class _StrictJson(AsyncJsonWebsocketConsumer):
-    """Sends strict JSON only: a bare NaN or Infinity would make JSON.parse throw in every browser reading it."""
+    """Sends strict JSON only: a bare NaN or Infinity would make JSON.parse throw in every browser reading it
+    (fleetcore.jsontext.dumps writes them as null; `json` with allow_nan=False raised, and the push was lost)."""
 
     @classmethod
     async def encode_json(cls, content):
-        return json.dumps(content, allow_nan=False)
+        return jsontext.dumps(content)
 
     _frame: list | None = None  # while dispatch_many runs: what the handlers send, to go as one frame
 

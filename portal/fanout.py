@@ -14,8 +14,9 @@ process, which hands what it reads to the sockets subscribed to it there:
   ticks it misses meanwhile are merged (the latest pose per robot) and sent as one when it is free, so a slow
   client costs its own encoding, never the others' rate.
 - EventFanout (every other push): each message dispatched to each subscribed consumer, in the order it came, as
-  the channel layer would have (its handler by the message's type); a burst that came together goes to the page
-  in one frame ({"type": "batch", "messages": [...]}, unpacked by static/fleet/live.js). A socket's messages wait while its
+  the channel layer would have (its handler by the message's type); the pushes that come within GATHER_S of the
+  first go to the page in one frame ({"type": "batch", "messages": [...]}, unpacked by static/fleet/live.js), as
+  does what came while a socket's last frame was being sent. A socket's messages wait while its
   snapshot is being sent, and a socket more than BACKLOG messages behind (a client that stopped reading) is
   closed (its page reconnects and starts again from a snapshot) rather than left holding memory for ever.
 """
@@ -260,10 +261,20 @@ class EventFanout(GroupReader):
     # their commands were lost (bench.cluster, 500 and 1,000 robots).
     BACKLOG = 20_000
     OVERFLOW_CODE = 1013  # "try again later": the page reconnects and starts from a new snapshot
-    # A socket this many messages behind gets them in one frame (the consumer's dispatch_many), at most FRAME_MAX
-    # a frame: a lease push for each of 1,000 robots was 1,000 frames to every page, each framed, compressed and
-    # written on its own, seconds of a web process for one fleet-wide command.
-    BURST, FRAME_MAX = 16, 500
+    # What a socket is sent goes in frames of at most FRAME_MAX messages (a lease push for each of 1,000 robots
+    # was 1,000 frames to every page, each framed, compressed and written on its own, seconds of a web process for
+    # one fleet-wide command).
+    FRAME_MAX = 500
+    # A push waits this long for the pushes that come with it, to go to each page in one frame: a robot's change
+    # is its status, its transition and its task list, pushed one after another and read from Redis one by one,
+    # and a dashboard was sent 13 to 26 frames a second of them beside the 10 ticks (bench.cluster, 100 robots
+    # under teleop, 2026-11-29): each frame compressed and written on every socket. One timer a group, not one a
+    # socket.
+    GATHER_S = 0.02
+
+    def __init__(self, layer, group: str) -> None:
+        super().__init__(layer, group)
+        self._gathering: asyncio.TimerHandle | None = None
 
     async def subscribe(self, consumer) -> None:
         """From now on the group's messages are kept for the consumer; they are dispatched once released."""
@@ -288,6 +299,12 @@ class EventFanout(GroupReader):
                 self._overflow(queue)
                 continue
             queue.pending.append(message)
+        if self._gathering is None:
+            self._gathering = asyncio.get_running_loop().call_later(self.GATHER_S, self._gathered)
+
+    def _gathered(self) -> None:
+        self._gathering = None
+        for queue in list(self.sockets.values()):
             self._drain(queue)
 
     def _drain(self, queue: _Queue) -> None:
@@ -295,11 +312,8 @@ class EventFanout(GroupReader):
             queue.task = asyncio.ensure_future(self._dispatch(queue))
 
     async def _dispatch(self, queue: _Queue) -> None:
-        while queue.pending:
-            if len(queue.pending) >= self.BURST:  # a burst: its messages go to the page in one frame
-                messages = [queue.pending.popleft() for _ in range(min(len(queue.pending), self.FRAME_MAX))]
-            else:
-                messages = [queue.pending.popleft()]
+        while queue.pending:  # what came while the last frame was sent goes at once, in the next
+            messages = [queue.pending.popleft() for _ in range(min(len(queue.pending), self.FRAME_MAX))]
             try:
                 if len(messages) > 1:
                     await queue.consumer.dispatch_many(messages)

@@ -54,3 +54,32 @@ def test_what_json_refuses_raises_its_value_error(text):
 def test_nesting_past_what_json_reads_raises_its_recursion_error():
     with pytest.raises(RecursionError):
         jsontext.loads("[" * 100_000 + "]" * 100_000)
+
+
+page_values = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**63), 2**63 - 1)
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(),
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=8), inner, max_size=5),
+    max_leaves=30,
+)
+
+
+@given(page_values)
+def test_what_a_page_is_sent_reads_back_as_it_was(value):
+    assert json.loads(jsontext.dumps(value)) == value
+
+
+def test_a_page_is_sent_null_for_nan_and_infinity_and_int_keys_as_json_writes_them():
+    """A bare NaN makes a browser's JSON.parse throw; `json` with allow_nan=False raised and the push was lost."""
+    text = jsontext.dumps({"battery": math.nan, "x": math.inf, "y": -math.inf, 7: [1.5]})
+    assert json.loads(text) == {"battery": None, "x": None, "y": None, "7": [1.5]}
+    assert "NaN" not in text and "Infinity" not in text
+
+
+def test_what_orjson_refuses_is_written_or_refused_by_json():
+    assert json.loads(jsontext.dumps({"name": "\ud800", "n": 2**70})) == {"name": "\ud800", "n": 2**70}
+    with pytest.raises(TypeError):
+        jsontext.dumps({"when": object()})

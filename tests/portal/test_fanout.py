@@ -128,13 +128,15 @@ async def test_a_tick_is_strict_json_and_a_pose_with_nan_is_left_out_not_the_tic
     assert [message["poses"] for message in socket.sent] == [[pose(1, 0.5)]]
 
 
-async def test_the_page_sockets_and_the_api_refuse_to_write_nan():
+async def test_the_page_sockets_and_the_api_never_write_nan():
+    """The page sockets write NaN and infinity as null (fleetcore.jsontext.dumps: the push goes, saying "not
+    known"); the API refuses them."""
     from portal.api import api
     from portal.consumers import AlertsConsumer, FleetConsumer
 
     for consumer in (FleetConsumer, AlertsConsumer):
-        with pytest.raises(ValueError, match="JSON compliant"):
-            await consumer.encode_json({"x": float("nan")})
+        text = await consumer.encode_json({"x": float("nan"), "y": float("-inf"), "z": 1.5})
+        assert json.loads(text, parse_constant=pytest.fail) == {"x": None, "y": None, "z": 1.5}
     with pytest.raises(ValueError, match="JSON compliant"):
         api.renderer.render(None, {"x": float("inf")}, response_status=200)
 
@@ -153,8 +155,17 @@ class Consumer:
         await self.gate.wait()
         self.got.append(message)
 
+    async def dispatch_many(self, messages: list[dict]) -> None:  # (a page consumer's: one frame of them)
+        for message in messages:
+            await self.dispatch(message)
+
     async def close(self, code: int) -> None:
         self.closed = code
+
+
+async def gathered() -> None:
+    """Past an event fanout's gathering window, and its sends."""
+    await asyncio.sleep(fanout.EventFanout.GATHER_S + 0.01)
 
 
 def status(robot_id: int) -> dict:
@@ -171,12 +182,12 @@ async def test_events_wait_for_the_snapshot_come_in_order_and_a_slow_socket_hold
 
     for robot_id in (1, 2, 3):
         hub.take(status(robot_id))
-    await asyncio.sleep(0.01)
+    await gathered()
     assert [m["id"] for m in fast.got] == [1, 2, 3]
     assert slow.got == [] and new.got == []  # the slow one is stuck on its first; the new one is held
     hub.release(new)  # its snapshot is out: what came meanwhile follows, in order
     slow.gate.set()
-    await asyncio.sleep(0.01)
+    await gathered()
     assert [m["id"] for m in new.got] == [1, 2, 3] and [m["id"] for m in slow.got] == [1, 2, 3]
 
 
@@ -189,8 +200,10 @@ async def test_a_socket_too_far_behind_is_closed_so_that_its_page_starts_again_f
         hub.release(consumer)
     for robot_id in range(1, 7):
         hub.take(status(robot_id))
-        await asyncio.sleep(0)
-    await asyncio.sleep(0.01)
+        await (
+            gathered()
+        )  # the fast one is sent each; the stuck one, stuck on its first, is 5 behind at the end
+    await gathered()
     assert [m["id"] for m in fast.got] == [1, 2, 3, 4, 5, 6]
     assert stuck.closed == fanout.EventFanout.OVERFLOW_CODE and stuck not in hub.sockets
 
@@ -239,12 +252,29 @@ async def test_a_socket_that_fell_behind_gets_the_backlog_in_frames_of_many_in_o
     for robot_id in range(1, 51):  # a fleet-wide push, all of it come before the socket's turn to send
         hub.take(status(robot_id))
     slow.gate.set()
-    await asyncio.sleep(0.01)
+    await gathered()
     assert [m["id"] for m in slow.got] == list(range(1, 51))
     assert [len(frame) for frame in slow.frames] == [30, 20]  # frames of FRAME_MAX at most
     hub.take(status(51))
-    await asyncio.sleep(0.01)
+    await gathered()
     assert slow.frames[-1] == [status(51)]  # one push alone: dispatched alone, as always
+
+
+async def test_the_pushes_that_come_within_the_gathering_window_go_in_one_frame_and_the_next_in_another():
+    """A robot's change is several pushes read from Redis one by one (status, transition, task list): each was a
+    frame of its own to every page socket, and a dashboard was sent two frames of them for every tick."""
+    hub = fanout.EventFanout(layer=None, group=live.FLEET_GROUP)
+    page = Bursting()
+    hub.sockets[page] = fanout._Queue(page)
+    hub.release(page)
+    for robot_id in (1, 2, 3):
+        hub.take(status(robot_id))
+        await asyncio.sleep(hub.GATHER_S / 10)
+    assert page.frames == []  # the first has waited less than GATHER_S
+    await gathered()
+    hub.take(status(4))
+    await gathered()
+    assert page.frames == [[status(1), status(2), status(3)], [status(4)]]
 
 
 async def test_a_page_consumer_sends_a_burst_as_one_batch_frame_and_a_bad_push_costs_only_itself():
@@ -276,7 +306,7 @@ async def test_a_socket_gone_under_its_pushes_is_dropped_quietly_and_the_others_
         hub.release(consumer)
     for robot_id in (1, 2, 3):
         hub.take(status(robot_id))
-    await asyncio.sleep(0.01)
+    await gathered()
     assert [m["id"] for m in fine.got] == [1, 2, 3]
     assert not hub.sockets[gone].pending and "Traceback" not in caplog.text
 
