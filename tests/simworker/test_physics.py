@@ -103,3 +103,54 @@ def test_a_fleet_that_keeps_the_last_command_drives_on_without_one():
     tb.command(0.2, 0.0)
     run(fleet.physics, 1.0)
     assert tb.twist()[0] == pytest.approx(0.2)  # still driving long after the model's 0.5 s timeout
+
+
+def _plain_drive(robot):
+    """The drive as first written (clamp calls, rotation_vector), kept here as the reference for the faster one."""
+
+    def clamp(value, low, high):
+        return low if value < low else high if value > high else value
+
+    def drive(body, gravity, damping, dt):
+        p, cmd = robot.profile, robot.cmd
+        if robot.physics.time - cmd.stamp > p.cmd_timeout:
+            tx = ty = tw = 0.0
+        else:
+            tx, ty, tw = cmd.vx, cmd.vy, cmd.wz
+        dv, dw = p.acc_v * dt, p.acc_w * dt
+        robot.vx += clamp(tx - robot.vx, -dv, dv)
+        robot.vy += clamp(ty - robot.vy, -dv, dv)
+        robot.wz += clamp(tw - robot.wz, -dw, dw)
+        c, s = body.rotation_vector
+        body.velocity = (robot.vx * c - robot.vy * s, robot.vx * s + robot.vy * c)
+        body.angular_velocity = robot.wz
+
+    return drive
+
+
+def test_the_drive_moves_robots_as_the_plain_ramp_does():
+    """simworker.physics drives each awake robot through a velocity callback at every step; the one kept is
+    written for speed. The same commands (ramps, turns, sideways, a reversal, a timeout) end on the same
+    poses as the plain ramp's, to a micrometre."""
+    worlds = [Physics(load_world("paper").map) for _ in range(2)]
+    fleets = []
+    for world in worlds:
+        fleets.append(
+            [
+                world.add_robot("tb", model("turtlebot3_burger"), -2.0, -0.5, 0.3),
+                world.add_robot("dog", model("spot"), 0.5, 1.0, -1.0),
+            ]
+        )
+    for robot in fleets[1]:
+        robot.body.velocity_func = _plain_drive(robot)
+    plan = [((0.2, 1.0, 0.0), (0.5, 0.0, 0.3)), ((-0.1, -2.0, 0.0), (0.0, 0.5, 0.2)), (None, None)]
+    for step in range(600):
+        for fleet in fleets:
+            for robot, cmd in zip(fleet, plan[min(step // 150, 2)], strict=True):
+                if cmd is not None and step % 5 == 0:
+                    robot.command(*cmd)
+        for world in worlds:
+            world.step()
+    for fast, plain in zip(*fleets, strict=True):
+        assert fast.pose() == pytest.approx(plain.pose(), abs=1e-6)
+        assert fast.twist() == pytest.approx(plain.twist(), abs=1e-6)
