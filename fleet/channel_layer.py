@@ -1,72 +1,108 @@
-"""channels_redis's RedisChannelLayer, with its per-channel cleanup lock's count kept right when a receive is
-cancelled while it waits for that lock, and a cancelled receive that ends.
+"""channels_redis' pub/sub channel layer, with subscriptions that survive their connection and a receive that can
+time out.
 
-channels_redis (4.3) counts the waiters of each per-channel lock (ChannelLock) to drop the lock when nobody
-waits, so that a lock is never reused on another event loop. A receive cancelled while waiting there (a consumer
-disconnecting, the pose fanout's reader stopping, a recorder's receive timing out) counts in but never out: the
-lock is kept for good, bound to the loop it waited on, and the first receive that must wait for it on a later loop
-(a worker's next async_to_sync, a test's next asyncio.run) fails with "... is bound to a different event loop".
+channels_redis 4.3's pub/sub layer holds one Redis connection per event loop for its subscriptions. When that
+connection is cut (Redis restarted, a proxy's idle timeout, CLIENT KILL), its receive task logs "Unexpected
+exception in receive task" and never subscribes again: every push to that web process is lost from then on, and
+its pages go on showing the fleet as it was (tests/fleet/test_channel_layer.py fails on the library's own). Here
+the task subscribes again to every channel and group it held, and then hands each of the loop's channels a
+RESUBSCRIBED message: what was published in between is lost, so a reader of the pages' pushes (portal.fanout)
+sends its pages back to a fresh snapshot.
 
-A receive cancelled just after it took over the layer's receive lock (the one blocking BZPOPMIN of the process)
-may lose the cancel (channels_redis 4.3, redis-py 8.1, Python 3.11: about one time in ten when two sockets close
-a millisecond apart): it goes on waiting in BZPOPMIN for a message that never comes, and its consumer with it.
-A page's socket closed by the web server's graceful shutdown then held it until uvicorn gave up ("Cancel 1
-running task(s), timeout graceful shutdown exceeded" on every Ctrl-C of `make run` with a page open). So a
-receive here runs as a task of its own: cancelled, it is cancelled again until it has ended (a second cancel
-always lands).
+And the library's receive, cancelled (a timeout: the recorder's `wait_for(receive, 1 s)`), unsubscribes its
+channel and drops its queue: what the channel's groups publish before the next receive is lost. Here a channel is
+kept until it leaves its last group (group_discard), whatever its receives do.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 
-from channels_redis import core
+from channels_redis import pubsub
+from channels_redis.utils import _wrap_close, decode_hosts
+
+import live
 
 log = logging.getLogger(__name__)
 
-RECANCEL_S = 0.05  # how long a cancelled receive is given to end before it is cancelled again
-RECANCEL_TRIES = 40  # then it is left to end on its own (logged): the caller's cancel is not held up longer
+RESUBSCRIBED = live.RESUBSCRIBED  # the message each channel of a loop gets once it is subscribed again
+RETRY_S = 0.5  # between attempts to subscribe again while Redis does not answer
 
 
-class ChannelLock(core.ChannelLock):
-    """The library's per-channel lock, counting out a waiter whose acquire failed (cancelled)."""
+class RedisPubSubChannelLayer(pubsub.RedisPubSubChannelLayer):
+    """The channel layer of every process (settings.CHANNEL_LAYERS)."""
 
-    async def acquire(self, channel):
-        try:
-            return await super().acquire(channel)
-        except BaseException:
-            self.wait_counts[channel] -= 1  # asyncio.Lock: a failed acquire does not hold the lock
-            if self.wait_counts[channel] < 1:
-                self.locks.pop(channel, None)
-                self.wait_counts.pop(channel, None)
-            raise
+    def _get_layer(self):
+        loop = asyncio.get_running_loop()
+        layer = self._layers.get(loop)
+        if layer is None:
+            layer = self._layers[loop] = _LoopLayer(*self._args, **self._kwargs, channel_layer=self)
+            _wrap_close(self, loop)
+        return layer
 
 
-class RedisChannelLayer(core.RedisChannelLayer):
-    """The Redis channel layer of every process (settings.CHANNEL_LAYERS)."""
+class _LoopLayer(pubsub.RedisPubSubLoopLayer):
+    """One event loop's layer: its shards' subscriptions survive a cut; a channel lives until its last group
+    is left."""
 
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self.receive_clean_locks = ChannelLock()
+    def __init__(self, *args, hosts=None, **kwargs) -> None:
+        super().__init__(*args, hosts=hosts, **kwargs)
+        self._shards = [_Shard(host, self) for host in decode_hosts(hosts)]
 
     async def receive(self, channel):
-        """The library's receive, which ends when it is cancelled (see the module's docstring)."""
-        inner = asyncio.ensure_future(super().receive(channel))
-        try:
-            return await asyncio.shield(inner)
-        except asyncio.CancelledError:
-            await _cancelled(inner)
-            raise
+        if channel not in self.channels:
+            await self._subscribe_to_channel(channel)
+        return self.channel_layer.deserialize(
+            await self.channels[channel].get()
+        )  # cancelled: nothing dropped
+
+    async def group_discard(self, group, channel):
+        await super().group_discard(group, channel)
+        if channel in self.channels and not any(channel in members for members in self.groups.values()):
+            del self.channels[channel]  # in no group any more: nothing will come to it
+            await self._get_shard(channel).unsubscribe(channel)
 
 
-async def _cancelled(task: asyncio.Task) -> None:
-    """Cancel the task until it has ended (bounded: RECANCEL_TRIES times, RECANCEL_S apart)."""
-    for _ in range(RECANCEL_TRIES):
-        task.cancel()
-        done, _pending = await asyncio.wait({task}, timeout=RECANCEL_S)
-        if done:
-            if not task.cancelled() and task.exception() is not None:
-                log.debug("a cancelled receive ended with %r", task.exception())
-            return
-    log.warning("a cancelled channel-layer receive did not end within %.1f s", RECANCEL_S * RECANCEL_TRIES)
+class _Shard(pubsub.RedisSingleShardConnection):
+    """One Redis server's connections of one event loop: its receive task survives a cut connection."""
+
+    async def _do_receiving(self) -> None:
+        cut = False
+        while True:
+            try:
+                if cut:
+                    await self._subscribe_again()
+                    cut = False
+                    self._tell_resubscribed()
+                if self._pubsub is not None and self._pubsub.subscribed:
+                    message = await self._pubsub.get_message(ignore_subscribe_messages=True, timeout=0.1)
+                    self._receive_message(message)
+                else:
+                    await asyncio.sleep(0.1)
+            except (asyncio.CancelledError, GeneratorExit):
+                raise
+            except Exception as exc:  # the connection cut, or Redis not answering: subscribe again
+                if not cut:
+                    log.warning("channel layer: subscriptions lost (%r); subscribing again", exc)
+                cut = True
+                await asyncio.sleep(RETRY_S)
+
+    async def _subscribe_again(self) -> None:
+        """A new subscription connection holding every channel and group this loop held."""
+        async with self._lock:
+            old, self._pubsub = self._pubsub, None
+            if old is not None:
+                with contextlib.suppress(Exception):  # its connection is gone already
+                    await old.aclose()
+            self._ensure_redis()
+            self._pubsub = self._redis.pubsub()
+            if self._subscribed_to:
+                await self._pubsub.subscribe(*self._subscribed_to)
+        log.warning("channel layer: subscribed again to %d channels and groups", len(self._subscribed_to))
+
+    def _tell_resubscribed(self) -> None:
+        data = self.channel_layer.channel_layer.serialize({"type": RESUBSCRIBED})
+        for queue in self.channel_layer.channels.values():
+            queue.put_nowait(data)

@@ -138,12 +138,12 @@ def celery_broker_url(redis_url: str) -> str:
     return redis_url
 
 
-CHANNELS_SOCKET_TIMEOUT = 30  # s: above channels-redis's 5 s BZPOPMIN, or an idle consumer dies
+CHANNELS_SOCKET_TIMEOUT = 30  # s: a channel-layer command (a PUBLISH) that gets no answer fails after this
 
 
 def channels_host(redis_url: str) -> dict:
-    """channels-redis takes redis:// and unix:// URLs as they are; redis-py 8's default 5 s socket timeout
-    equals channels-redis's 5 s blocking receive, so an idle WebSocket consumer crashed with TimeoutError."""
+    """channels-redis takes redis:// and unix:// URLs as they are, with redis-py's options beside them (its list
+    layer's 5 s blocking receive once met redis-py 8's default 5 s socket timeout: idle consumers crashed)."""
     return {"address": redis_url, "socket_timeout": CHANNELS_SOCKET_TIMEOUT}
 
 

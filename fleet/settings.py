@@ -108,13 +108,16 @@ CACHES = {
     }
 }
 
+# Redis pub/sub (channels_redis' own layer): a push is one PUBLISH and each web process's reader of a group (its one
+# subscriber there: portal.fanout) gets it on its subscription, where the list-based layer cost the sender about
+# seven round trips and a Lua script, and every reader three or four more per push (docs/scale.md, eighth session:
+# the web hosts 0.77x the CPU at 100 robots). A push is not kept for a reader that is not subscribed at that moment:
+# nothing is queued in Redis for a web process that is away, as the pages hold their state from a snapshot anyway.
 CHANNEL_LAYERS = {
     "default": {
-        "BACKEND": "fleet.channel_layer.RedisChannelLayer",  # fleet/channel_layer.py: one lock fix
+        "BACKEND": "fleet.channel_layer.RedisPubSubChannelLayer",  # subscriptions that survive a cut
         "CONFIG": {
             "hosts": [channels_host(REDIS_URL)],
-            "capacity": 1000,
-            "expiry": 10,
             # Separate runs on one Redis (e.g. two test runs) never hear each other's pushes.
             "prefix": os.environ.get("FLEET_REDIS_PREFIX", "fleet") + ":asgi",
         },

@@ -21,6 +21,9 @@ from django.db import transaction
 
 FLEET_GROUP = "fleet"
 ALERTS_GROUP = "alerts"
+# What every reader of a group is handed by the channel layer (fleet.channel_layer) once its subscription, cut,
+# is taken again: the pushes published in between are lost (portal.fanout sends its pages back to a snapshot).
+RESUBSCRIBED = "layer.resubscribed"
 log = logging.getLogger(__name__)
 
 
@@ -212,10 +215,10 @@ def _by_group(pushes: list[tuple[str, dict]]) -> dict[str, list[dict]]:
 
 
 def _batched(pushes: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
-    """The pushes to each group as one message per BATCH_MAX: a push costs the sender about seven Redis round
-    trips (channels_redis' group_send) and each web process's reader four, whatever its size; a stop of 100
-    robots pushed 100 statuses to the fleet group (bench.cluster, redis-cli MONITOR: most of a web process's
-    Redis commands). Each group's pushes keep their order; there is no order between groups (each has its own
+    """The pushes to each group as one message per BATCH_MAX: a push costs the sender a Redis round trip (a
+    PUBLISH; about seven with channels_redis' list layer, used until 2026-11-29) and every reader its decoding
+    and handling, whatever its size; a stop of 100 robots pushed 100 statuses to the fleet group (bench.cluster,
+    redis-cli MONITOR: most of a web process's Redis commands). Each group's pushes keep their order; there is no order between groups (each has its own
     readers, and a page reads one group)."""
     out = []
     for group, payloads in _by_group(pushes).items():

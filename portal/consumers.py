@@ -322,6 +322,8 @@ class _PageConsumer(_StrictJson):
         self.joined = [EventFanout.of(self.channel_layer, group) for group in self.group_names()]
         for events in self.joined:  # the process's one reader of each group (portal.fanout)
             await events.subscribe(self)
+        for events in self.joined:  # a process's first page: its readers are joining the groups (bounded)
+            await events.joined()
         await self.send_json(snapshot)
         for events in self.joined:  # what came meanwhile follows the snapshot
             events.release(self)

@@ -36,7 +36,12 @@ import live
 log = logging.getLogger(__name__)
 
 TICK = live.poses([])["type"]  # the message type of a tick of poses
-REJOIN_S = 600.0  # renew the group membership well inside channels_redis's group_expiry (a day by default)
+JOIN_WAIT_S = (
+    0.25  # a page's connect waits this long at most for its groups' reader to join (Redis hung: no more)
+)
+REJOIN_S = (
+    600.0  # join again now and then (a no-op while subscribed; a layer with expiring membership needs it)
+)
 _fanouts: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> {(kind, group): reader}
 
 
@@ -122,6 +127,7 @@ class GroupReader(abc.ABC):
         self.layer, self.group = layer, group
         self.sockets: dict = {}  # consumer -> what the subclass keeps for it
         self.reader: asyncio.Task | None = None
+        self.member = asyncio.Event()  # set once the running reader has joined the group
 
     @classmethod
     def of(cls, layer, group: str):
@@ -135,7 +141,17 @@ class GroupReader(abc.ABC):
     def _add(self, consumer, kept) -> None:
         self.sockets[consumer] = kept
         if self.reader is None or self.reader.done():
+            self.member = asyncio.Event()
             self.reader = asyncio.ensure_future(self._read())
+
+    async def joined(self, timeout: float = JOIN_WAIT_S) -> bool:
+        """Wait, `timeout` at most, until the reader is a member of the group (at once when it is): a page's
+        snapshot sent before that could miss the pushes made meanwhile. False when Redis did not let it join."""
+        try:
+            await asyncio.wait_for(asyncio.shield(self.member.wait()), timeout)
+        except TimeoutError:
+            return False
+        return True
 
     async def unsubscribe(self, consumer) -> None:
         """The socket closed; the last one out stops the reader, which leaves the group (waited for, bounded)."""
@@ -151,7 +167,6 @@ class GroupReader(abc.ABC):
         """What one message read from the group becomes (on the loop, never waiting)."""
 
     async def _read(self) -> None:
-        # the layer's default prefix: channels_redis reads a process's channels of one prefix together
         channel = await self.layer.new_channel()
         joined = None  # loop time of the last group_add that went through
         try:
@@ -162,6 +177,7 @@ class GroupReader(abc.ABC):
                     if when is None and joined is None:
                         continue  # not in the group yet: nothing would come
                     joined = when or joined
+                    self.member.set()
                 try:
                     message = await self.layer.receive(channel)
                 except asyncio.CancelledError:
@@ -294,6 +310,12 @@ class EventFanout(GroupReader):
             self._drain(queue)
 
     def take(self, message: dict) -> None:
+        if message.get("type") == live.RESUBSCRIBED:  # pushes were lost while the layer's connection was cut
+            for queue in list(self.sockets.values()):
+                self._close(
+                    queue, "%s fanout: pushes lost while Redis was away: a socket is sent back to a snapshot"
+                )
+            return
         for queue in list(self.sockets.values()):
             if len(queue.pending) >= self.BACKLOG:
                 self._overflow(queue)
@@ -335,8 +357,13 @@ class EventFanout(GroupReader):
                 )
 
     def _overflow(self, queue: _Queue) -> None:
-        log.warning("%s fanout: a socket %d messages behind is closed (its page reconnects)", self.group,
-                    len(queue.pending))  # fmt: skip
+        self._close(
+            queue, f"%s fanout: a socket {len(queue.pending)} messages behind is closed (its page reconnects)"
+        )
+
+    def _close(self, queue: _Queue, why: str) -> None:
+        """Close the socket with OVERFLOW_CODE: its page reconnects and starts from a new snapshot."""
+        log.warning(why, self.group)
         self.sockets.pop(queue.consumer, None)
         queue.pending.clear()
         closing = asyncio.ensure_future(queue.consumer.close(code=self.OVERFLOW_CODE))
