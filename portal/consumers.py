@@ -306,6 +306,17 @@ class _PageConsumer(_StrictJson):
         if not self.abilities["view"]:
             await self.close(code=4403)
             return
+        if not self.known():
+            await self.close(code=4404)
+            return
+        # subscribed before the snapshot is read: a change made while it is read (or while this connect warms up)
+        # reaches the page after it, in order; read first, such a change was never sent to this page, which showed
+        # the state the snapshot had until the robot changed again
+        self.joined = [EventFanout.of(self.channel_layer, group) for group in self.group_names()]
+        for events in self.joined:  # the process's one reader of each group (portal.fanout)
+            await events.subscribe(self)
+        for events in self.joined:  # a process's first page: its readers are joining the groups (bounded)
+            await events.joined()
         snapshot = await database_sync_to_async(self.snapshot)()
         if snapshot is None:
             await self.close(code=4404)
@@ -319,11 +330,6 @@ class _PageConsumer(_StrictJson):
             await database_sync_to_async(
                 warm_up, thread_sensitive=False
             )()  # a first typed stop waits for no ontology
-        self.joined = [EventFanout.of(self.channel_layer, group) for group in self.group_names()]
-        for events in self.joined:  # the process's one reader of each group (portal.fanout)
-            await events.subscribe(self)
-        for events in self.joined:  # a process's first page: its readers are joining the groups (bounded)
-            await events.joined()
         await self.send_json(snapshot)
         for events in self.joined:  # what came meanwhile follows the snapshot
             events.release(self)
@@ -333,6 +339,10 @@ class _PageConsumer(_StrictJson):
     def poses_of(self) -> int | None:
         """The robot whose poses this page shows; None for all."""
         return None
+
+    def known(self) -> bool:
+        """Whether the page's address can name something (checked before any group is joined for it)."""
+        return True
 
     @staticmethod
     def granted(user) -> dict[str, bool]:
@@ -502,6 +512,10 @@ class FleetConsumer(_PageConsumer):
 class RobotConsumer(_PageConsumer):
     """/ws/robots/<id>/: one robot's status, transitions, lease, goal and pose."""
 
+    def known(self) -> bool:
+        self.robot_id = self.scope["url_route"]["kwargs"]["robot_id"]
+        return 1 <= self.robot_id <= socket_input.MAX_ID
+
     def group_names(self):
         return [live.robot_group(self.robot_id)]
 
@@ -509,9 +523,6 @@ class RobotConsumer(_PageConsumer):
         return self.robot_id
 
     def snapshot(self):
-        self.robot_id = self.scope["url_route"]["kwargs"]["robot_id"]
-        if not 1 <= self.robot_id <= socket_input.MAX_ID:
-            return None
         robot = Robot.objects.filter(pk=self.robot_id).first()
         return snapshots.robot_snapshot(robot) if robot else None
 

@@ -617,3 +617,28 @@ async def test_page_sockets_take_no_channel_of_their_own(viewer, fleet, monkeypa
     assert readers >= 1 and len(opened) == readers
     await first.disconnect()
     await second.disconnect()
+
+
+async def test_a_change_made_while_the_snapshot_is_read_reaches_the_page_after_it(viewer, fleet, monkeypatch):
+    """The page's groups are joined before its snapshot is read: a change made meanwhile (here, right after the
+    read) follows the snapshot. Read first and joined after, it was never sent to that page, which showed the
+    snapshot's state until the robot changed again."""
+    from portal.consumers import FleetConsumer
+
+    turtlebot, read = fleet["turtlebot"], FleetConsumer.snapshot
+
+    def read_then_change(self):
+        snapshot = read(self)
+        turtlebot.state = "motion"
+        turtlebot.save()
+        live.robot_status(turtlebot)  # outside a transaction: sent at once
+        return snapshot
+
+    monkeypatch.setattr(FleetConsumer, "snapshot", read_then_change)
+    communicator = await _connect("/ws/fleet/", viewer)
+    snapshot = await communicator.receive_json_from(timeout=5)
+    assert snapshot["type"] == "snapshot"
+    assert {robot["name"]: robot["state"] for robot in snapshot["robots"]}["turtlebot"] == "ready"
+    [status] = [push for push in await _pushes(communicator, 1) if push["type"] == "robot.status"]
+    assert (status["robot"], status["state"]) == ("turtlebot", "motion")
+    await communicator.disconnect()
