@@ -88,6 +88,30 @@ def test_a_lock_taken_by_another_is_lost_for_good(lock):
     assert lease.lost and not lease.held
 
 
+def test_a_lock_released_by_another_is_seen_at_the_next_tick_not_the_next_renewal(settings):
+    """The watchdog releases the lock of a holder whose process it takes for gone; a holder alive (only its
+    presence connection cut) drove on until its next renewal told it (0.25 s: 0.038 m in a CI run). The flags'
+    read, every tick, carries the lock's holder; renewals here come every 5 s, so only that read can tell."""
+    settings.FLEET_EXEC_KEY_PREFIX = f"test:board:{uuid.uuid4().hex[:8]}"
+    lock = coordination.RobotLock(1, ttl_ms=10_000)
+    assert lock.acquire()
+
+    async def body(board):
+        lease = board.lease(lock, lively=10.0)
+        await asyncio.sleep(0.1)
+        held_before = lease.held
+        coordination.RobotLock(1, lock.token).release()  # as the watchdog does (execution.watchdog)
+        started = time.monotonic()
+        while lease.held and time.monotonic() - started < 2.0:
+            lease.beat()
+            await asyncio.sleep(0.005)
+        return held_before, lease, time.monotonic() - started
+
+    held_before, lease, took = on_board(body, tick=0.05, every=5.0)
+    assert held_before and not lease.held and took < 0.5, took
+    assert lease.why_lost == "its lock on the robot was released by another (it is not ours any more)"
+
+
 def test_the_flags_of_every_lease_come_in_one_round_trip_per_tick(lock, monkeypatch):
     other = coordination.RobotLock(2, ttl_ms=400)
     assert other.acquire()
