@@ -10,8 +10,9 @@ RESUBSCRIBED message: what was published in between is lost, so a reader of the 
 sends its pages back to a fresh snapshot.
 
 And the library's receive, cancelled (a timeout: the recorder's `wait_for(receive, 1 s)`), unsubscribes its
-channel and drops its queue: what the channel's groups publish before the next receive is lost. Here a channel is
-kept until it leaves its last group (group_discard), whatever its receives do.
+channel and drops its queue: what the channel's groups publish before the next receive is lost. Here a channel in
+a group is kept until it leaves its last group (group_discard), whatever its receives do; one in no group goes
+with its cancelled receive, as in the library (a consumer's own channel, its socket closed).
 """
 
 from __future__ import annotations
@@ -44,8 +45,8 @@ class RedisPubSubChannelLayer(pubsub.RedisPubSubChannelLayer):
 
 
 class _LoopLayer(pubsub.RedisPubSubLoopLayer):
-    """One event loop's layer: its shards' subscriptions survive a cut; a channel lives until its last group
-    is left."""
+    """One event loop's layer: its shards' subscriptions survive a cut; a channel in a group lives until it
+    leaves its last group."""
 
     def __init__(self, *args, hosts=None, **kwargs) -> None:
         super().__init__(*args, hosts=hosts, **kwargs)
@@ -54,14 +55,23 @@ class _LoopLayer(pubsub.RedisPubSubLoopLayer):
     async def receive(self, channel):
         if channel not in self.channels:
             await self._subscribe_to_channel(channel)
-        return self.channel_layer.deserialize(
-            await self.channels[channel].get()
-        )  # cancelled: nothing dropped
+        try:
+            return self.channel_layer.deserialize(await self.channels[channel].get())
+        except asyncio.CancelledError:  # a timeout, or its consumer gone: kept while a group feeds it
+            if not self._grouped(channel):
+                await self._drop(channel)
+            raise
 
     async def group_discard(self, group, channel):
         await super().group_discard(group, channel)
-        if channel in self.channels and not any(channel in members for members in self.groups.values()):
-            del self.channels[channel]  # in no group any more: nothing will come to it
+        if not self._grouped(channel):  # in no group any more: nothing will come to it
+            await self._drop(channel)
+
+    def _grouped(self, channel: str) -> bool:
+        return any(channel in members for members in self.groups.values())
+
+    async def _drop(self, channel: str) -> None:
+        if self.channels.pop(channel, None) is not None:
             await self._get_shard(channel).unsubscribe(channel)
 
 

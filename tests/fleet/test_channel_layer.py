@@ -65,3 +65,12 @@ async def test_a_receive_that_timed_out_loses_nothing_published_before_the_next_
     assert (await _received(layer, channel, 5))["n"] == 1
     await layer.group_discard(group, channel)
     assert channel not in layer._get_layer().channels  # in no group: its queue and subscription are gone
+
+
+async def test_a_channel_in_no_group_goes_with_its_cancelled_receive():
+    """As in the library: a consumer's own channel (never in a group) is not left subscribed once its socket is
+    gone and its receive cancelled."""
+    layer = get_channel_layer()
+    channel = await layer.new_channel()
+    assert await _received(layer, channel, 0.1) is None
+    assert channel not in layer._get_layer().channels
