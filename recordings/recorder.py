@@ -140,6 +140,12 @@ async def _write_last_poses(writer: RecordingWriter, names: dict[int, str], star
         writer.pose(names[robot_id], pose["x"], pose["y"], pose["yaw"], start)
 
 
+GAP = "recording_gap"
+GAP_WORDS = (
+    "the live pushes' connection to Redis was cut and taken again: what was pushed in between is missing"
+)
+
+
 async def _write(writer: RecordingWriter, message: dict, names: dict[int, str]) -> None:
     kind, now = message.get("type"), time.time()
     if kind == "fleet.poses":
@@ -163,6 +169,8 @@ async def _write(writer: RecordingWriter, message: dict, names: dict[int, str]) 
         writer.goal(message["robot"], message.get("name"), message.get("x"), message.get("y"), now)
     elif kind == "alert.update":
         writer.alert(message.get("alert") or {}, now)
+    elif kind == live.RESUBSCRIBED:  # the layer's subscription was cut: what was pushed meanwhile is not here
+        writer.alert({"kind": GAP, "severity": "warning", "message": GAP_WORDS, "status": "open"}, now)
 
 
 async def _subscribe_raw(writer: RecordingWriter, raw_topics) -> list:

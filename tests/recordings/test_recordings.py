@@ -180,3 +180,17 @@ def test_a_replay_at_its_start_shows_every_robots_pose(fleet, tmp_path):
     first = {name: poses[0][0] for name, poses in frames["robots"].items()}
     assert first["husky"] <= first["turtlebot"]  # there from the first instant
     assert len(frames["robots"]["turtlebot"]) == 5  # a pose refused at the gate (no place) is not recorded
+
+
+def test_a_gap_in_the_live_pushes_is_marked_in_the_recording(tmp_path):
+    """The channel layer's subscription was cut and taken again (fleet.channel_layer): the pushes in between are
+    lost, and the recording says so where it happened instead of looking whole."""
+    from recordings import mcapfile
+
+    writer = mcapfile.RecordingWriter(tmp_path / "gap.mcap")
+    asyncio.run(recorder._write(writer, {"type": live.RESUBSCRIBED}, {}))
+    writer.close()
+    [(topic, _, _, alert)] = list(read_messages(tmp_path / "gap.mcap"))
+    assert topic == "/fleet/alerts" and alert.kind == recorder.GAP and "missing" in alert.message
+    [event] = replay_frames(tmp_path / "gap.mcap")["events"]  # and the replay page says it in its events
+    assert event["text"].startswith(f"alert {recorder.GAP} fleet: the live pushes' connection")
