@@ -218,8 +218,8 @@ def _batched(pushes: list[tuple[str, dict]]) -> list[tuple[str, dict]]:
     """The pushes to each group as one message per BATCH_MAX: a push costs the sender a Redis round trip (a
     PUBLISH; about seven with channels_redis' list layer, used until 2026-11-29) and every reader its decoding
     and handling, whatever its size; a stop of 100 robots pushed 100 statuses to the fleet group (bench.cluster,
-    redis-cli MONITOR: most of a web process's Redis commands). Each group's pushes keep their order; there is no order between groups (each has its own
-    readers, and a page reads one group)."""
+    redis-cli MONITOR: most of a web process's Redis commands). Each group's pushes keep their order; there is
+    no order between groups (each has its own readers, and a page reads one group)."""
     out = []
     for group, payloads in _by_group(pushes).items():
         for start in range(0, len(payloads), BATCH_MAX):

@@ -341,7 +341,8 @@ class _PageConsumer(_StrictJson):
         return None
 
     def known(self) -> bool:
-        """Whether the page's address can name something (checked before any group is joined for it)."""
+        """Whether the page's address can name something (read from it, and checked, before any group is joined
+        for it)."""
         return True
 
     @staticmethod

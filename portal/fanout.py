@@ -36,12 +36,10 @@ import live
 log = logging.getLogger(__name__)
 
 TICK = live.poses([])["type"]  # the message type of a tick of poses
-JOIN_WAIT_S = (
-    0.25  # a page's connect waits this long at most for its groups' reader to join (Redis hung: no more)
-)
-REJOIN_S = (
-    600.0  # join again now and then (a no-op while subscribed; a layer with expiring membership needs it)
-)
+# a page's connect waits this long at most for its groups' reader to join (Redis hung: no more)
+JOIN_WAIT_S = 0.25
+# join again now and then (a no-op while subscribed; a layer with expiring membership needs it)
+REJOIN_S = 600.0
 _fanouts: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # event loop -> {(kind, group): reader}
 
 
@@ -312,9 +310,7 @@ class EventFanout(GroupReader):
     def take(self, message: dict) -> None:
         if message.get("type") == live.RESUBSCRIBED:  # pushes were lost while the layer's connection was cut
             for queue in list(self.sockets.values()):
-                self._close(
-                    queue, "%s fanout: pushes lost while Redis was away: a socket is sent back to a snapshot"
-                )
+                self._close(queue, "pushes lost while Redis was away: a socket is sent back to a snapshot")
             return
         for queue in list(self.sockets.values()):
             if len(queue.pending) >= self.BACKLOG:
@@ -357,13 +353,11 @@ class EventFanout(GroupReader):
                 )
 
     def _overflow(self, queue: _Queue) -> None:
-        self._close(
-            queue, f"%s fanout: a socket {len(queue.pending)} messages behind is closed (its page reconnects)"
-        )
+        self._close(queue, f"a socket {len(queue.pending)} messages behind is closed (its page reconnects)")
 
     def _close(self, queue: _Queue, why: str) -> None:
         """Close the socket with OVERFLOW_CODE: its page reconnects and starts from a new snapshot."""
-        log.warning(why, self.group)
+        log.warning("%s fanout: %s", self.group, why)
         self.sockets.pop(queue.consumer, None)
         queue.pending.clear()
         closing = asyncio.ensure_future(queue.consumer.close(code=self.OVERFLOW_CODE))
