@@ -154,3 +154,34 @@ def test_the_drive_moves_robots_as_the_plain_ramp_does():
     for fast, plain in zip(*fleets, strict=True):
         assert fast.pose() == pytest.approx(plain.pose(), abs=1e-6)
         assert fast.twist() == pytest.approx(plain.twist(), abs=1e-6)
+
+
+def test_robots_at_rest_fall_asleep_and_a_command_wakes_them(physics):
+    """A resting body costs the simulator nothing only once Chipmunk puts it to sleep: the drive must not write
+    a velocity to a body at rest (Chipmunk's setters wake it). Once asleep, a command wakes it and it drives."""
+    still = physics.add_robot("still", model("turtlebot3_burger"), -2.0, -0.5, 0.0)
+    turned = physics.add_robot("turned", model("turtlebot3_burger"), 0.5, 1.0, 0.0)
+    turned.command(0.0, 1.0)  # times out after 0.5 s, ramps down, then rests
+    run(physics, 2.5)
+    assert still.body.is_sleeping and turned.body.is_sleeping
+    at_rest = turned.pose()
+    run(physics, 1.0, turned, (0.0, 1.0))
+    assert not turned.body.is_sleeping
+    assert abs(turned.pose()[2] - at_rest[2]) > 0.5  # it turned under the command
+    assert still.body.is_sleeping
+
+
+def test_a_resting_robot_pushed_by_another_is_woken_and_does_not_slide_on(physics):
+    """Nothing slows a body in a top-down world but the drive: a robot at rest that is shoved must be set
+    back to rest, not left gliding with the push (and the touch wakes it from its sleep)."""
+    pusher = physics.add_robot("pusher", model("turtlebot3_burger"), -2.0, -0.5, 0.0)
+    resting = physics.add_robot("resting", model("turtlebot3_burger"), -1.6, -0.5, 0.0)
+    run(physics, 1.5)
+    assert resting.body.is_sleeping
+    run(physics, 2.0, pusher, (0.2, 0.0))  # drives into it
+    assert physics.contacts, "the pusher never reached the resting robot"
+    run(physics, 1.0)  # the pusher's command times out and it stops
+    after_push = resting.pose()
+    run(physics, 2.0)
+    assert resting.pose() == pytest.approx(after_push, abs=1e-3)
+    assert resting.twist() == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
