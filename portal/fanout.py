@@ -12,7 +12,9 @@ process, which hands what it reads to the sockets subscribed to it there:
 - PoseFanout (the ticks of poses): encoded once for all the fleet sockets of the process; a robot page gets its
   own robot's pose only. A socket still busy sending the previous tick (a slow client) is not waited for: the
   ticks it misses meanwhile are merged (the latest pose per robot) and sent as one when it is free, so a slow
-  client costs its own encoding, never the others' rate.
+  client costs its own encoding, never the others' rate. A socket one tick behind (a tick that came while the
+  previous one was being sent: the two shards' ticks come together) is sent that tick's shared text, not an
+  encoding of its own (25 sockets of a web process each encoded it: a tenth of the process under bench.cluster).
 - EventFanout (every other push): each message dispatched to each subscribed consumer, in the order it came, as
   the channel layer would have (its handler by the message's type); the pushes that come within GATHER_S of the
   first go to the page in one frame ({"type": "batch", "messages": [...]}, unpacked by static/fleet/live.js), as
@@ -102,13 +104,27 @@ def _strict(pose) -> bool:
 class _Socket:
     """One subscriber: its consumer, the robot it is limited to (None: all), and what waits to be sent."""
 
-    __slots__ = ("consumer", "robot_id", "sending", "task", "waiting")
+    __slots__ = ("consumer", "missed", "robot_id", "sending", "task")
 
     def __init__(self, consumer, robot_id: int | None) -> None:
         self.consumer, self.robot_id = consumer, robot_id
         self.sending = False
         self.task: asyncio.Task | None = None
-        self.waiting: dict[int, dict] = {}  # robot id -> latest pose, merged while a send is under way
+        self.missed: list[_Tick] = []  # the ticks that came while a send was under way, oldest first
+
+
+class _Tick:
+    """One tick of poses as the fleet sockets get it: encoded once, when a first socket needs its text."""
+
+    __slots__ = ("_text", "poses")
+
+    def __init__(self, poses: list) -> None:
+        self.poses, self._text = poses, None
+
+    def text(self) -> str:
+        if self._text is None:
+            self._text = encode(self.poses)
+        return self._text
 
 
 class GroupReader(abc.ABC):
@@ -222,31 +238,36 @@ class PoseFanout(GroupReader):
             self.deliver(message.get("poses") or [])
 
     def deliver(self, poses: list) -> None:
-        """Hand one tick to every socket: one encoding for all the fleet sockets that are free."""
-        text = None
+        """Hand one tick to every socket: one encoding for all the fleet sockets (those still sending the
+        previous tick get the same text after it)."""
+        tick = _Tick(poses)
         for socket in list(self.sockets.values()):
-            mine = poses if socket.robot_id is None else [p for p in poses if p.get("id") == socket.robot_id]
-            if not mine:
-                continue
-            if socket.sending:
-                socket.waiting.update((p["id"], p) for p in mine)
-                continue
             if socket.robot_id is None:
-                text = text if text is not None else encode(poses)
-                out = text
+                mine = tick
             else:
-                out = encode(mine)
+                robot_poses = [p for p in poses if p.get("id") == socket.robot_id]
+                if not robot_poses:
+                    continue
+                mine = _Tick(robot_poses)
+            if socket.sending:
+                socket.missed.append(mine)
+                continue
             socket.sending = True
-            socket.task = asyncio.ensure_future(self._send(socket, out))
+            socket.task = asyncio.ensure_future(self._send(socket, mine.text()))
 
     async def _send(self, socket: _Socket, text: str) -> None:
         try:
             while True:
                 await socket.consumer.send(text_data=text)
-                if not socket.waiting:
+                if not socket.missed:
                     return
-                merged, socket.waiting = list(socket.waiting.values()), {}
-                text = encode(merged)  # this slow socket's own catch-up: the latest pose of each robot missed
+                missed, socket.missed = socket.missed, []
+                if len(missed) == 1:  # one tick behind (the other shard's tick came with this one): its text
+                    text = missed[0].text()
+                    continue
+                # a slow socket's own catch-up: the latest pose of each robot in the ticks it missed
+                merged = {p["id"]: p for tick in missed for p in tick.poses}
+                text = encode(list(merged.values()))
         except Exception as exc:  # the client went away under the send: its disconnect unsubscribes it
             log.debug("pose fanout: send failed: %s", exc)
         finally:
