@@ -12,9 +12,8 @@ process, which hands what it reads to the sockets subscribed to it there:
 - PoseFanout (the ticks of poses): encoded once for all the fleet sockets of the process; a robot page gets its
   own robot's pose only. A socket still busy sending the previous tick (a slow client) is not waited for: the
   ticks it misses meanwhile are merged (the latest pose per robot) and sent as one when it is free, so a slow
-  client costs its own encoding, never the others' rate. A socket one tick behind (a tick that came while the
-  previous one was being sent: the two shards' ticks come together) is sent that tick's shared text, not an
-  encoding of its own (25 sockets of a web process each encoded it: a tenth of the process under bench.cluster).
+  client costs its own encoding, never the others' rate. A socket only one tick behind (a tick that came before its
+  send of the previous one ran: a busy web process) is sent that tick's shared text, not an encoding of its own.
 - EventFanout (every other push): each message dispatched to each subscribed consumer, in the order it came, as
   the channel layer would have (its handler by the message's type); the pushes that come within GATHER_S of the
   first go to the page in one frame ({"type": "batch", "messages": [...]}, unpacked by static/fleet/live.js), as
@@ -262,7 +261,7 @@ class PoseFanout(GroupReader):
                 if not socket.missed:
                     return
                 missed, socket.missed = socket.missed, []
-                if len(missed) == 1:  # one tick behind (the other shard's tick came with this one): its text
+                if len(missed) == 1:  # one tick behind (it came before this send ran): its shared text
                     text = missed[0].text()
                     continue
                 # a slow socket's own catch-up: the latest pose of each robot in the ticks it missed

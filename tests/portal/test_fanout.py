@@ -62,22 +62,22 @@ async def test_one_encoding_per_tick_for_every_fleet_socket_and_a_slow_one_gets_
     assert [message["poses"] for message in slow.sent] == [ticks[0], [pose(1, 0.3), pose(2, 0.3)]]
 
 
-async def test_ticks_that_come_together_are_encoded_once_each_for_every_socket(monkeypatch):
-    """The two shards' ticks reach a web process together: every socket is still sending the first when the
-    second comes. Each socket then gets the second tick's shared text, not an encoding of its own."""
+async def test_ticks_read_together_are_encoded_once_each_for_every_socket(monkeypatch):
+    """A busy web process reads two ticks before its sockets' sends of the first have run: each socket then gets
+    the second tick's shared text, not an encoding of its own."""
     encoded, encode = [], fanout.encode
     monkeypatch.setattr(fanout, "encode", lambda poses: encoded.append(poses) or encode(poses))
     hub = fanout.PoseFanout(layer=None)
     sockets = [Socket() for _ in range(25)]
     for socket in sockets:
         hub.sockets[socket] = fanout._Socket(socket, None)
-    shard_a, shard_b = [pose(1, 0.1), pose(2, 0.1)], [pose(51, 0.5), pose(52, 0.5)]
-    hub.deliver(shard_a)
-    hub.deliver(shard_b)  # in the same turn of the loop: no socket has been sent the first yet
+    first, second = [pose(1, 0.1), pose(2, 0.1)], [pose(1, 0.2), pose(2, 0.2)]
+    hub.deliver(first)
+    hub.deliver(second)  # in the same turn of the loop: no socket has been sent the first yet
     await asyncio.sleep(0.01)
     for socket in sockets:
-        assert [message["poses"] for message in socket.sent] == [shard_a, shard_b]
-    assert encoded == [shard_a, shard_b]
+        assert [message["poses"] for message in socket.sent] == [first, second]
+    assert encoded == [first, second]
 
 
 async def members_of_this_process(group: str) -> list[str]:
