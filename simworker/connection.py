@@ -19,6 +19,7 @@ import logging
 import time
 import uuid
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from websockets.asyncio.server import ServerConnection
@@ -33,6 +34,25 @@ STALL_SECONDS = 5.0  # a client that accepts no data for this long is disconnect
 FLOOD_RATE = 2000.0  # publish ops per second per client before the excess is dropped, and
 PER_TOPIC_RATE = 50.0  # more for each topic the endpoint takes (a controller's 50 Hz on each robot's cmd_vel)
 WRITE_BATCH = 256  # frames joined into one socket write
+
+
+class Deferred:
+    """A frame written only when it is sent, once for every client that sends it. rosbridge's QueueMessageHandler
+    holds the ROS message itself and serialises it as it goes out, so a held message that a newer one replaces is
+    never written: the links' odometry subscription (a throttle with a queue_length of 1) takes one message in
+    two of the simulator's 20 Hz, and the simulator wrote both."""
+
+    __slots__ = ("_build", "_text")
+
+    def __init__(self, build: Callable[[], str]) -> None:
+        self._build: Callable[[], str] | None = build
+        self._text: str | None = None
+
+    def __call__(self) -> str:
+        if self._text is None:
+            self._text = self._build()
+            self._build = None
+        return self._text
 
 
 @dataclass
@@ -111,7 +131,7 @@ class Client:
         self.pending: dict[str, asyncio.Future] = {}  # forwarded calls awaiting its service_response
         self.fragments: dict[str, dict[int, str]] = {}
 
-    def send(self, text: str | bytes, sub: Subscription | None = None) -> None:
+    def send(self, text: str | bytes | Deferred, sub: Subscription | None = None) -> None:
         """Queue a frame (fragments of it past fragment_size) for the writer; drop the oldest when full."""
         if sub is not None:
             if sub.holds:
@@ -126,7 +146,7 @@ class Client:
             sub.queued += 1
         self._enqueue(text, sub)
 
-    def _hold(self, text: str | bytes, sub: Subscription) -> None:
+    def _hold(self, text: str | bytes | Deferred, sub: Subscription) -> None:
         """Keep the newest queue_length messages; the oldest is dropped past it; one goes each throttle interval."""
         if sub.held.maxlen != sub.queue_length:
             sub.held = deque(sub.held, maxlen=sub.queue_length)
@@ -150,7 +170,9 @@ class Client:
         if sub.held:
             sub.release = asyncio.get_running_loop().call_later(sub.throttle, self._release, sub)
 
-    def _enqueue(self, text: str | bytes, sub: Subscription | None) -> None:
+    def _enqueue(self, text: str | bytes | Deferred, sub: Subscription | None) -> None:
+        if isinstance(text, Deferred):
+            text = text()
         if isinstance(text, str) and self.fragment_size and len(text) > self.fragment_size:
             text = outgoing.fragments(text, self.fragment_size)
             log.info("[Client %s] sending %d parts [fragment size: %s; expected duration: ~0s]",

@@ -7,10 +7,12 @@ import json
 import math
 import zlib
 from collections.abc import Callable
+from functools import partial
 
 from fleetcore.catalog import ModelProfile
 from fleetcore.world import RobotSpec
 from simworker import camera, diagnostics
+from simworker.connection import Deferred
 from simworker.graph import Graph
 from simworker.interfaces import build_interface
 from simworker.physics import Physics, RobotBody
@@ -180,11 +182,8 @@ class SimRobot:
             stamp = (self.seq, *stamp)
         x += {"nan": math.nan, "jump": 1000.0}.get(self.odom_fault or "", 0.0)
         values = (*stamp, x, y, math.sin(yaw / 2), math.cos(yaw / 2), vx, vy, wz)
-        for topic, tpl in wanted:
-            text = tpl % values
-            if not math.isfinite(x):  # as rosbridge's json.dumps writes it: a bare NaN
-                text = text.replace("nan", "NaN")
-            server.publish_text(topic, text)
+        for topic, tpl in wanted:  # written only if it goes (a held one replaced by a newer never is)
+            server.publish_text(topic, Deferred(partial(_odometry_text, tpl, values, math.isfinite(x))))
 
     def publish_scan(self, t: float) -> None:
         """Publish sensor_msgs/LaserScan on each scan topic someone subscribes to (one ray cast for all)."""
@@ -247,3 +246,8 @@ class SimRobot:
         }
         msg["data"] = base64.b64encode(image).decode("ascii")  # rosbridge sends uint8[] as base64
         self.server.publish_text(topic, json.dumps(msg, separators=(",", ":")))
+
+
+def _odometry_text(template: str, values: tuple, finite: bool) -> str:
+    text = template % values
+    return text if finite else text.replace("nan", "NaN")  # as rosbridge's json.dumps writes it: a bare NaN

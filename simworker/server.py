@@ -25,7 +25,7 @@ from websockets.exceptions import ConnectionClosed
 
 from fleetcore import jsontext
 from simworker import outgoing, rosapi
-from simworker.connection import Client, Subscription
+from simworker.connection import Client, Deferred, Subscription
 from simworker.graph import Graph, ServiceError
 from simworker.messages import ConversionError, registry
 
@@ -128,13 +128,25 @@ class RosbridgeServer:
         if topic in self.subscribers or topic in self.graph.latched_topics:
             self.publish_text(topic, json.dumps(msg, separators=(",", ":")))
 
-    def publish_text(self, topic: str, msg_json: str) -> None:
-        """Publish an already-encoded message body on topic."""
+    def publish_text(self, topic: str, msg_json: str | Deferred) -> None:
+        """Publish an already-encoded message body on topic; a Deferred one is written only for a client that
+        sends it (not for one that holds it until a newer replaces it)."""
+        subscribers = self.subscribers.get(topic, {})
+        latched = topic in self.graph.latched_topics
+        if isinstance(msg_json, Deferred):
+            if latched or any(sub.compression != "none" for sub in subscribers.values()):
+                msg_json = msg_json()
+            else:
+                body = msg_json
+                frame = Deferred(lambda: f'{{"op":"publish","topic":"{topic}","msg":{body()}}}')
+                for client, sub in subscribers.items():
+                    client.send(frame, sub)
+                return
         text = f'{{"op":"publish","topic":"{topic}","msg":{msg_json}}}'
-        if topic in self.graph.latched_topics:
+        if latched:
             self.latched[topic] = text
         encoded: dict[str, str | bytes] = {"none": text}
-        for client, sub in self.subscribers.get(topic, {}).items():
+        for client, sub in subscribers.items():
             if (how := sub.compression) not in encoded:
                 encoded[how] = outgoing.compress(how, topic, msg_json, self.types, self._definition(topic))
             client.send(encoded[how], sub)

@@ -86,6 +86,25 @@ def test_odometry_for_a_throttled_subscriber_alone_is_built_only_when_it_is_sent
     assert all(b - a >= 5 for a, b in itertools.pairwise(seqs))  # ~10 at 20 Hz under 500 ms
 
 
+def test_odometry_held_for_a_queued_subscriber_is_written_only_when_it_goes(world, bridge, monkeypatch):
+    """A throttle with a queue_length holds the newest message for its turn (rosbridge's QueueMessageHandler),
+    which serialises the ROS message as it goes out: one replaced by a newer one is never written. 20 Hz
+    odometry held for a 500 ms turn is written about twice a second, not twenty times."""
+    import simworker.robot
+
+    built, text_of = [], simworker.robot._odometry_text
+    monkeypatch.setattr(simworker.robot, "_odometry_text", lambda *args: built.append(1) or text_of(*args))
+    client = bridge(world.urls["turtlebot"])
+    client.send("subscribe", topic="/odom", id="held", throttle_rate=500, queue_length=1)
+    first = client.wait_for(lambda m: m.get("topic") == "/odom")
+    built.clear()
+    second = client.wait_for(lambda m: m.get("topic") == "/odom")
+    third = client.wait_for(lambda m: m.get("topic") == "/odom")
+    assert 2 <= len(built) <= 3  # the two sent, at most one more held: not the ~20 of a second at 20 Hz
+    seqs = [m["msg"]["header"]["seq"] for m in (first, second, third)]
+    assert all(b - a >= 5 for a, b in itertools.pairwise(seqs))  # the newest each turn: ~10 at 20 Hz
+
+
 def test_ros1_params_get_set_has_and_namespaces(world, bridge):
     client = bridge(world.urls["robots"])
     tree = json.loads(client.call("/rosapi/get_param", {"name": "/robot1"})["values"]["value"])
