@@ -181,6 +181,7 @@ class Board:
         """Keep this acquired lock from now on (renewed while its command loop beats)."""
         lease = Lease(lock, lively)
         self.leases.add(lease)
+        self._nudged.set()  # its flags are read at once (an idle board waits for this)
         return lease
 
     def drop(self, lease: Lease) -> None:
@@ -204,7 +205,8 @@ class Board:
             await asyncio.wait_for(release, REDIS_TIMEOUT_S * 2)
 
     async def run(self) -> None:
-        """Tick until cancelled, at once when a flag is raised; the renewals' thread meanwhile."""
+        """Tick until cancelled, at once when a flag is raised or a lease is taken, not at all while there is no
+        lease; the renewals' thread meanwhile."""
         listening = asyncio.ensure_future(self._listen())
         ended = threading.Event()
         threading.Thread(target=self._renewals, args=(ended,), name="executor renewals", daemon=True).start()
@@ -213,6 +215,9 @@ class Board:
                 started = time.monotonic()
                 self._nudged.clear()
                 await self.once()
+                if not self.leases:  # nothing to read until a lease is taken: no tick (an idle executor
+                    await self._nudged.wait()  # woke 20 times a second for nothing)
+                    continue
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(
                         self._nudged.wait(), max(0.0, self.tick - (time.monotonic() - started))

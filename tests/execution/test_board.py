@@ -36,6 +36,38 @@ def on_board(body, tick: float = 0.02, every: float = 0.05):
     return asyncio.run(main())
 
 
+def test_a_board_with_no_lease_does_not_tick_and_a_lease_is_read_at_once(lock, monkeypatch):
+    """An executor driving nothing has no flags to read: its board waits for a lease instead of waking every
+    tick (each idle executor cost about a hundredth of a core), and a lease taken is read at once, not at the
+    next tick."""
+    rounds = []
+    once = Board.once
+
+    async def counted(board):
+        rounds.append((time.monotonic(), len(board.leases)))
+        await once(board)
+
+    monkeypatch.setattr(Board, "once", counted)
+
+    async def idle(board):
+        await asyncio.sleep(0.3)  # 15 ticks of 0.02 s, were it ticking
+
+    on_board(idle, tick=0.02)
+    assert len(rounds) <= 1  # the one look at start-up
+
+    async def leased(board):
+        await asyncio.sleep(0.05)
+        taken_at = time.monotonic()
+        board.lease(lock, lively=5.0).beat()
+        await asyncio.sleep(0.3)
+        return taken_at
+
+    rounds.clear()
+    taken_at = on_board(leased, tick=10.0)  # a tick later would be seconds later
+    assert [leases for _, leases in rounds] == [0, 1]
+    assert rounds[1][0] - taken_at < 0.3
+
+
 def test_a_beating_command_loop_keeps_the_lock_past_its_time_to_live(lock):
     async def body(board):
         lease = board.lease(lock, lively=1.0)
