@@ -174,6 +174,10 @@ class Board:
         self._client: redis.asyncio.Redis | None = None
         self._storing: asyncio.Future | None = None
         self._nudged = asyncio.Event()  # a flag was raised somewhere: read now
+        # a lease was taken: what an idle board waits for. Not a nudge: 250 robots started together then each
+        # made a read of every lease's flags, back to back, and the executors' locks lapsed under the load
+        # ("executor lost" for 125 of 500 robots, bench.cluster)
+        self._leased = asyncio.Event()
         # subscribed to this process's presence channel (coordination.present)
         self._present = asyncio.Event()
 
@@ -181,7 +185,7 @@ class Board:
         """Keep this acquired lock from now on (renewed while its command loop beats)."""
         lease = Lease(lock, lively)
         self.leases.add(lease)
-        self._nudged.set()  # its flags are read at once (an idle board waits for this)
+        self._leased.set()  # an idle board wakes: the first lease's flags are read at once
         return lease
 
     def drop(self, lease: Lease) -> None:
@@ -216,7 +220,8 @@ class Board:
                 self._nudged.clear()
                 await self.once()
                 if not self.leases:  # nothing to read until a lease is taken: no tick (an idle executor
-                    await self._nudged.wait()  # woke 20 times a second for nothing)
+                    self._leased.clear()  # woke 20 times a second for nothing)
+                    await self._leased.wait()
                     continue
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(

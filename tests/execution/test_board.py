@@ -68,6 +68,31 @@ def test_a_board_with_no_lease_does_not_tick_and_a_lease_is_read_at_once(lock, m
     assert rounds[1][0] - taken_at < 0.3
 
 
+def test_robots_started_together_cost_their_board_no_read_each(monkeypatch):
+    """An executor starting 250 robots takes their leases one round trip after another. Each lease woke the board
+    for a read of every lease's flags, back to back, and under that load the executors' locks lapsed ("executor
+    lost" for 125 of 500 robots, bench.cluster): only an idle board wakes for a lease, the others wait their tick."""
+    rounds = []
+    once = Board.once
+
+    async def counted(board):
+        rounds.append(len(board.leases))
+        await once(board)
+
+    monkeypatch.setattr(Board, "once", counted)
+
+    async def started_together(board):
+        await asyncio.sleep(0.05)
+        for robot_id in range(1, 21):
+            lock = coordination.RobotLock(robot_id, ttl_ms=60_000)
+            board.lease(lock, lively=5.0).beat()
+            await asyncio.sleep(0.005)  # the next robot's lock: a round trip later
+        await asyncio.sleep(0.1)
+
+    on_board(started_together, tick=10.0)
+    assert rounds[0] == 0 and len(rounds) <= 3  # start-up, the first lease's wake (a tick is 10 s)
+
+
 def test_a_beating_command_loop_keeps_the_lock_past_its_time_to_live(lock):
     async def body(board):
         lease = board.lease(lock, lively=1.0)
