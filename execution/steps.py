@@ -56,6 +56,10 @@ class Aborted(StepFailed):
     """The robot's own stack gave up on a goal (move_base, nav2: after its own recoveries)."""
 
 
+class Late(StepFailed):
+    """The step ran out of its time with the robot still on its way (it is halted)."""
+
+
 class Stalled(StepFailed):
     """The robot is commanded to move but makes no progress: something the plan did not know is in the way."""
 
@@ -304,7 +308,7 @@ async def drive(
     """Run a velocity controller tick by tick on odometry until it is done, watching its progress.
 
     stall_s: raise Stalled when the robot makes no progress (towards `goal`, or at all) for that long while
-    commanded; StepFailed when it has not finished within limit_s.
+    commanded; Late when it has not finished within limit_s.
     """
     progress = Progress(limit_s, stall_s if stall_s is not None else math.inf, goal)
     while True:
@@ -316,7 +320,7 @@ async def drive(
         verdict = progress.update(pose)
         if verdict == "late":
             await session.link.halt()
-            raise StepFailed(f"{session.robot.name}: did not finish within {limit_s:.0f} s")
+            raise Late(f"{session.robot.name}: did not finish within {limit_s:.0f} s")
         if verdict == "stalled":
             await session.link.halt()
             raise Stalled(

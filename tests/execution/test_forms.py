@@ -134,6 +134,20 @@ def test_turn_left_then_right_by_degrees(turtle_world, fleet_admin):
     assert abs(said_degrees(right) - track.turned()) < 4
 
 
+def test_a_turn_that_runs_out_of_time_says_how_far_it_turned(turtle_world, fleet_admin, monkeypatch):
+    """A relative motion that fails (out of time, or stuck) says how far the robot went, measured where it came
+    to rest, as a finished one does: "did not finish within 1 s" alone left out what the robot had done."""
+    from execution import handlers
+
+    monkeypatch.setattr(handlers, "travel_time", lambda distance, turn, limits: 1.0)
+    with Track(turtle_world) as track:
+        instruction = wait_final(submit("turn turtlebot left 270 degrees", fleet_admin), timeout=60)
+    assert instruction.status == "failed", instruction.outcome
+    assert "did not finish within 1 s: turned" in instruction.outcome, instruction.outcome
+    assert 20 < track.turned() < 250
+    assert abs(said_degrees(instruction) - track.turned()) < 4, (instruction.outcome, track.turned())
+
+
 def test_a_robots_start_is_three_calls_through_the_blocking_pool_before_its_first_command(
     turtle_world, fleet_admin, monkeypatch
 ):
