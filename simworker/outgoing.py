@@ -39,9 +39,14 @@ def fragments(text: str, size: int) -> list[str]:
     ]
 
 
+def publish_op(topic: str, msg_json: str) -> str:
+    """The publish op carrying an encoded message body, as rosbridge writes it (no id, no type)."""
+    return f'{{"op":"publish","topic":"{topic}","msg":{msg_json}}}'
+
+
 def compress(how: str, topic: str, msg_json: str, reg: Registry, definition: MsgDef | None) -> str | bytes:
     """A publish frame for a subscription asking for `how` (png or cbor; anything else: plain JSON)."""
-    plain = f'{{"op":"publish","topic":"{topic}","msg":{msg_json}}}'
+    plain = publish_op(topic, msg_json)
     if how == "png":
         return json.dumps({"op": "png", "data": png(plain)})
     if how == "cbor":

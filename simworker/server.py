@@ -138,11 +138,11 @@ class RosbridgeServer:
                 msg_json = msg_json()
             else:
                 body = msg_json
-                frame = Deferred(lambda: f'{{"op":"publish","topic":"{topic}","msg":{body()}}}')
+                frame = Deferred(lambda: outgoing.publish_op(topic, body()))
                 for client, sub in subscribers.items():
                     client.send(frame, sub)
                 return
-        text = f'{{"op":"publish","topic":"{topic}","msg":{msg_json}}}'
+        text = outgoing.publish_op(topic, msg_json)
         if latched:
             self.latched[topic] = text
         encoded: dict[str, str | bytes] = {"none": text}
