@@ -543,16 +543,28 @@ async def instruct(portal: Portal, text: str, ids: dict[str, int]) -> tuple[dict
     return summary, sent
 
 
+# one robot's share of an outcome that says the angle it turned: "robot7: succeeded (turned 104° left ...", or a
+# failed turn's "robot7: failed (robot7: did not finish within 12 s: turned 60° left (90° left asked))"
+SAID_TURN = re.compile(r"(\w+): (?:succeeded|failed) \((?:[^;]*?: )?turned (\d+)° (left|right)")
+
+
+def said_in(outcome: str) -> dict[str, float]:
+    """{robot: the signed degrees the outcome says it turned}, for the robots whose share says it."""
+    return {
+        name: float(deg) * (1 if side == "left" else -1) for name, deg, side in SAID_TURN.findall(outcome)
+    }
+
+
 async def said_turns(portal: Portal, instruction_ids: list[int]) -> tuple[dict[str, float], dict[str, int]]:
-    """{robot: the degrees its instruction's outcome says it turned} ("robot7: succeeded (turned 104° left ..."),
-    and the reasons of the robots' failures, counted (robot names taken out)."""
+    """{robot: the degrees its instruction's outcome says it turned} (said_in), and the reasons of the robots'
+    failures, counted (robot names and angles taken out)."""
     said, failed = {}, Counter()
     for pk in instruction_ids:
         outcome = (await asyncio.to_thread(portal.get, f"instructions/{pk}"))["outcome"]
-        for name, degrees, side in re.findall(r"(\w+): succeeded \(turned (\d+)° (left|right)", outcome):
-            said[name] = float(degrees) * (1 if side == "left" else -1)
+        said.update(said_in(outcome))
         for reason in re.findall(r"\w+: failed \((.*?)\)(?:; |$)", outcome):
-            failed[re.sub(r"robot\d+", "robotN", reason)[:160]] += 1
+            reason = re.sub(r": turned \d+° .*$", "", re.sub(r"robot\d+", "robotN", reason))
+            failed[reason[:160]] += 1
     return said, dict(failed.most_common(5))
 
 

@@ -1,5 +1,6 @@
 """bench.cluster's staleness told apart by what the bench was doing when each pose came."""
 
+from bench import cluster
 from bench.cluster import INSTRUCTIONS_PHASE, by_phase
 
 
@@ -31,3 +32,16 @@ def test_staleness_is_split_into_the_rounds_and_half_seconds_after_each_stop_all
 
 def test_no_sample_gives_no_phase_not_an_error():
     assert by_phase([], 0.0, [], 0.0) == {}
+
+
+def test_the_angle_an_outcome_says_is_read_for_succeeded_and_failed_turns():
+    """bench.cluster judges each robot's words against its odometry: a failed turn says how far it went too."""
+    outcome = (
+        "robot1: succeeded (turned 90° left); "
+        "robot2: succeeded (turned 104° left (90° left asked)); "
+        "robot3: failed (robot3: did not finish within 12 s: turned 60° left (90° left asked)); "
+        "robot4: failed (robot4: stuck turning 90° left (no progress for 3 s near (1.0, -4.1)): turned 12° right "
+        "(90° left asked)); "
+        "robot5: failed (executor lost: the process running it stopped renewing its lock; the robot was stopped)"
+    )
+    assert cluster.said_in(outcome) == {"robot1": 90.0, "robot2": 104.0, "robot3": 60.0, "robot4": -12.0}
