@@ -219,10 +219,9 @@ async def move_by(session: Session, step: Step) -> str:
     limits = step.pace(session.link.limits()).limits
     controller = motion.Straight(distance, limits)
     limit = travel_time(abs(distance), 0.0, limits)
-    await _drive_by(
+    return await _drive_by(
         session, f"moving {doing}", controller, limit, lambda done: outcomes.moved(distance, done)
     )
-    return outcomes.moved(distance, controller.done(await at_rest(session)))
 
 
 async def turn_by(session: Session, step: Step) -> str:
@@ -232,23 +231,21 @@ async def turn_by(session: Session, step: Step) -> str:
     limits = step.pace(session.link.limits()).limits
     controller = motion.TurnBy(math.radians(degrees), limits)
     limit = travel_time(0.0, abs(math.radians(degrees)), limits)
-    await _drive_by(
+    return await _drive_by(
         session,
         f"turning {doing}",
         controller,
         limit,
         lambda done: outcomes.turned(degrees, math.degrees(done)),
     )
-    return outcomes.turned(degrees, math.degrees(controller.done(await at_rest(session))))
 
 
 async def _drive_by(
     session: Session, doing: str, controller, limit: float, said: Callable[[float], str]
-) -> None:
-    """A relative motion: the robot's state says what it does, and a stall fails the step in those words. A step
-    that stalls or runs out of time says how far the robot went, measured where it came to rest (said: the
-    controller's measure in words), as a finished one does: "did not finish within 12 s" alone left out that it
-    had turned 60° of the 90° asked."""
+) -> str:
+    """A relative motion: the robot's state says what it does; the words of how far it went, measured where it
+    came to rest (said: the controller's measure in words). A step that stalls or runs out of time fails with
+    those words too: "did not finish within 12 s" alone left out that it had turned 60° of the 90° asked."""
     await _transition(session, Event.MOVE, doing)
     try:
         await drive(session, controller, limit, stall_s=STALL_S)
@@ -256,6 +253,7 @@ async def _drive_by(
         so_far = said(controller.done(await at_rest(session)))
         reason = await _stuck(session, doing, str(exc)) if isinstance(exc, Stalled) else str(exc)
         raise StepFailed(f"{reason}: {so_far}") from exc
+    return said(controller.done(await at_rest(session)))
 
 
 async def wait(session: Session, step: Step) -> str:
